@@ -1,0 +1,239 @@
+"""``tcot bench``: speed and memory figures, each a median over repeats with its spread, and every
+comparison a ratio measured in the same run. Writes DIR/bench.json and DIR/bench.md.
+
+bench.json: {"figures": {name: {median, min, max, unit}}, "ratios": {name: value}, "command": ...}.
+The tick ratio per controller is ``ratios["tick_over_mj_step/<controller>"]``: wall time of one full
+control tick (Ruckig sample + controller + safety + ctrl_dt/sim_dt physics steps) over the wall time
+of the same number of bare ``mj_step`` calls on the same task scene.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.run_config import RunConfig
+
+BENCH_TASK = "goal_cube_on_plate"
+
+
+def _stat(samples, unit: str) -> dict:
+    s = [float(x) for x in samples]
+    return {"median": statistics.median(s), "min": min(s), "max": max(s), "unit": unit, "n": len(s)}
+
+
+def _runner(cfg: RunConfig):
+    from tcot_hybrid.episode import EpisodeRunner
+
+    r = EpisodeRunner(cfg)
+    r.settle()
+    plan = r.stack.planner.plan(r.observe(0), mode="global")
+    r.stack.executor.set_plan(plan)
+    return r
+
+
+def bare_step_us(cfg: RunConfig, n: int) -> float:
+    """Per-step wall time of bare mj_step on the task scene, robot torques held at gravity compensation."""
+    r = _runner(cfg)
+    sim = r.stack.sim
+    m, d = sim.model, sim.data
+    mujoco.mj_forward(m, d)
+    d.ctrl[sim.arm_act] = d.qfrc_bias[sim.arm_dof]
+    t = time.perf_counter()
+    for _ in range(n):
+        mujoco.mj_step(m, d)
+    return (time.perf_counter() - t) / n * 1e6
+
+
+def tick_us(cfg: RunConfig, n: int) -> float:
+    """Per-tick wall time of the full control tick while executing an oracle plan."""
+    r = _runner(cfg)
+    ex = r.stack.executor
+    for _ in range(20):  # warm up (first IK solves, caches)
+        ex.tick()
+    t = time.perf_counter()
+    for _ in range(n):
+        ex.tick()
+    return (time.perf_counter() - t) / n * 1e6
+
+
+def episode_rtf(cfg: RunConfig, *, render: bool) -> tuple[float, float]:
+    """Real-time factor (sim time / wall time) of a whole oracle episode, optionally rendering the planner
+    image at every planner step (as a learned planner would need)."""
+    from tcot_hybrid.episode import EpisodeRunner
+
+    r = EpisodeRunner(cfg)
+    if render:
+        px = cfg.scene.planner_image_px
+        r.frame_hook = lambda rr, step: rr.stack.sim.render(cfg.scene.planner_camera, px, px)
+    rec = r.run()
+    return rec["sim_time_s"] / rec["wall_time_s"], rec["sim_time_s"]
+
+
+def ik_figures(robot_name: str, n: int, seed: int = 0) -> dict[str, dict]:
+    from tcot_hybrid.ik import IKConfig, IKTarget, make_ik
+    from tcot_hybrid.robot import build_pinocchio_model, load_robot_spec
+
+    import pinocchio as pin
+
+    spec = load_robot_spec(robot_name)
+    pr = build_pinocchio_model(spec, lock_gripper=True)
+    data = pr.model.createData()
+    rng = np.random.default_rng(seed)
+    out = {}
+    # Reachable targets: TCP poses of configurations near home, seeded from home.
+    targets, seeds = [], []
+    for _ in range(n):
+        q = np.clip(spec.home_q + rng.normal(0, 0.25, spec.dof), spec.q_min + 0.05, spec.q_max - 0.05)
+        pin.framesForwardKinematics(pr.model, data, q)
+        T = data.oMf[pr.tcp_frame_id]
+        targets.append(IKTarget(pos=T.translation.copy(), rot=T.rotation.copy()))
+        seeds.append(spec.home_q.copy())
+    for label, name, solver in (("mink_daqp", "mink", "daqp"), ("mink_osqp", "mink", "osqp"),
+                                ("pinocchio", "pinocchio", None)):
+        cfg = IKConfig() if solver is None else dataclasses.replace(IKConfig(), solver=solver)
+        ik = make_ik(name, spec, cfg)
+        times, conv = [], 0
+        for tgt, s in zip(targets, seeds):
+            t = time.perf_counter()
+            res = ik.solve(tgt, s)
+            times.append((time.perf_counter() - t) * 1e3)
+            conv += bool(res.converged)
+        out[f"ik_solve_ms/{label}"] = _stat(times, "ms")
+        out[f"ik_converged/{label}"] = _stat([conv / n], "fraction")
+    return out
+
+
+def ruckig_figures(robot_name: str, n: int, seed: int = 0) -> dict[str, dict]:
+    from tcot_hybrid.robot import load_robot_spec
+    from tcot_hybrid.smoothing import JointSmoother
+
+    spec = load_robot_spec(robot_name)
+    sm = JointSmoother.from_spec(spec, ctrl_dt=0.01)
+    sm.reset(spec.home_q)
+    rng = np.random.default_rng(seed)
+    seg, tick = [], []
+    for _ in range(n):
+        target = np.clip(spec.home_q + rng.normal(0, 0.3, spec.dof), spec.q_min + 0.05, spec.q_max - 0.05)
+        t = time.perf_counter()
+        sm.set_target(target)
+        seg.append((time.perf_counter() - t) * 1e6)
+        for _ in range(5):
+            t = time.perf_counter()
+            sm.step()
+            tick.append((time.perf_counter() - t) * 1e6)
+    return {"ruckig_segment_us": _stat(seg, "us"), "ruckig_step_us": _stat(tick, "us")}
+
+
+def render_ms(cfg: RunConfig, n: int) -> float:
+    r = _runner(cfg)
+    px = cfg.scene.planner_image_px
+    r.stack.sim.render(cfg.scene.planner_camera, px, px)
+    t = time.perf_counter()
+    for _ in range(n):
+        r.stack.sim.render(cfg.scene.planner_camera, px, px)
+    return (time.perf_counter() - t) / n * 1e3
+
+
+def peak_rss_mb_of_run(task: str) -> float:
+    """Peak resident memory of a separate ``tcot run`` process [MB]."""
+    code = ("import resource, sys; from tcot_hybrid.cli import main; rc = main(sys.argv[1:]); "
+            "print('PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", code, "run", "--task", task, "--seed", "0", "--out", tmp],
+                             capture_output=True, text=True,
+                             env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+    for line in out.stdout.splitlines():
+        if line.startswith("PEAK_KB"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError(f"tcot run failed in the bench: {out.stderr[-500:]}")
+
+
+def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command: str = "") -> dict:
+    from tqdm import tqdm
+
+    from tcot_hybrid.controllers import list_controllers
+
+    repeats = 3 if quick else 7
+    n_steps = 1000 if quick else 4000
+    n_ticks = 200 if quick else 800
+    base = RunConfig(task=BENCH_TASK, robot=robot, seed=0)
+    substeps = base.timing.substeps
+    figures: dict[str, dict] = {}
+    ratios: dict[str, float] = {}
+    controllers = list_controllers()
+    steps = tqdm(total=repeats * (1 + len(controllers)) + 6, desc="bench", unit="job", disable=None)
+    bare = []
+    for _ in range(repeats):
+        bare.append(bare_step_us(base, n_steps))
+        steps.update(1)
+    figures["mj_step_us"] = _stat(bare, "us")
+    figures["mj_step_rate_hz"] = _stat([1e6 / b for b in bare], "Hz")
+    for ctrl in controllers:
+        cfg = dataclasses.replace(base, controller=ctrl)
+        ticks = []
+        for _ in range(repeats):
+            ticks.append(tick_us(cfg, n_ticks))
+            steps.update(1)
+        figures[f"tick_us/{ctrl}"] = _stat(ticks, "us")
+        ratios[f"tick_over_mj_step/{ctrl}"] = round(statistics.median(ticks) / (substeps * statistics.median(bare)), 3)
+        ratios[f"tick_over_ctrl_dt/{ctrl}"] = round(statistics.median(ticks) * 1e-6 / base.timing.ctrl_dt, 4)
+    figures.update(ik_figures(robot, 30 if quick else 150)); steps.update(1)
+    figures.update(ruckig_figures(robot, 50 if quick else 300)); steps.update(1)
+    figures["render_planner_image_ms"] = _stat([render_ms(base, 20 if quick else 100) for _ in range(repeats)], "ms")
+    steps.update(1)
+    rtf_plain, rtf_render = [], []
+    for seed in range(2 if quick else 5):
+        cfg = dataclasses.replace(base, seed=seed)
+        rtf_plain.append(episode_rtf(cfg, render=False)[0])
+        rtf_render.append(episode_rtf(cfg, render=True)[0])
+    steps.update(2)
+    figures["episode_real_time_factor"] = _stat(rtf_plain, "x")
+    figures["episode_real_time_factor_rendering"] = _stat(rtf_render, "x")
+    ratios["bare_physics_real_time_factor"] = round(base.timing.sim_dt / (statistics.median(bare) * 1e-6), 1)
+    ratios["episode_rtf_over_bare_physics_rtf"] = round(statistics.median(rtf_plain) / ratios["bare_physics_real_time_factor"], 3)
+    figures["peak_rss_mb/tcot_run"] = _stat([peak_rss_mb_of_run(BENCH_TASK)], "MB")
+    steps.update(1)
+    steps.close()
+    result = {"figures": figures, "ratios": ratios, "command": command, "quick": quick, "robot": robot,
+              "task": BENCH_TASK, "timing": dataclasses.asdict(base.timing),
+              "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "mujoco": mujoco.__version__}}
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(result, indent=2))
+    (out / "bench.md").write_text(markdown(result))
+    return result
+
+
+def markdown(result: dict) -> str:
+    lines = [f"Measured by `{result['command']}` (robot {result['robot']}, task {result['task']}, "
+             f"sim_dt {result['timing']['sim_dt']} s, ctrl_dt {result['timing']['ctrl_dt']} s, "
+             f"plan_dt {result['timing']['plan_dt']} s, {result['machine']['cpus']} CPUs).", "",
+             "| figure | median | min | max | unit |", "|---|---|---|---|---|"]
+    for name, f in result["figures"].items():
+        lines.append(f"| {name} | {f['median']:.4g} | {f['min']:.4g} | {f['max']:.4g} | {f['unit']} |")
+    lines += ["", "| ratio | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.4g} |" for k, v in result["ratios"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def update_readme_section(readme: str | Path, marker: str, text: str) -> None:
+    """Replace the text between <!-- {marker}:start --> and <!-- {marker}:end --> in the README."""
+    p = Path(readme)
+    s = p.read_text()
+    start, end = f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
+    if start not in s or end not in s:
+        raise ValueError(f"{p} has no {start} … {end} section")
+    head, rest = s.split(start, 1)
+    _, tail = rest.split(end, 1)
+    p.write_text(f"{head}{start}\n{text.rstrip()}\n{end}{tail}")

@@ -1,0 +1,264 @@
+"""The ``tcot`` command: list, run (more subcommands join as the planner and GLSR land).
+
+Every config field can be set from a file (``--config run.yaml``) and overridden on the command line
+(``--timing.ctrl-dt 0.004``, ``--ik-params.damping 1e-3``, ``--controller-params kp_scale 2``).
+Bad input exits non-zero with a message naming the bad value and the valid choices.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import tyro  # noqa: E402
+
+from tcot_hybrid.errors import TcotError  # noqa: E402
+from tcot_hybrid.run_config import RunConfig, load_config_file  # noqa: E402
+
+
+# --- tcot list ----------------------------------------------------------------------------------------
+
+def listing() -> dict:
+    from tcot_hybrid.controllers import list_controllers
+    from tcot_hybrid.ik import list_ik
+    from tcot_hybrid.planners import list_planners
+    from tcot_hybrid.robot import list_robots
+    from tcot_hybrid.tasks import list_tasks
+
+    return {
+        "tasks": [{"name": t.name, "suite": t.suite, "instruction": t.instruction} for t in list_tasks()],
+        "robots": list_robots(),
+        "controllers": list_controllers(),
+        "ik": list_ik(),
+        "planners": list_planners(),
+    }
+
+
+def cmd_list(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="tcot list", description="tasks by suite, robots, controllers, IK backends, planners")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    args = p.parse_args(argv)
+    data = listing()
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    suites: dict[str, list] = {}
+    for t in data["tasks"]:
+        suites.setdefault(t["suite"], []).append(t)
+    print("tasks:")
+    for suite, tasks in suites.items():
+        print(f"  {suite}:")
+        for t in tasks:
+            print(f"    {t['name']:<34} {t['instruction']}")
+    for key in ("robots", "controllers", "ik", "planners"):
+        print(f"{key}: {', '.join(data[key])}")
+    return 0
+
+
+# --- tcot run -----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, kw_only=True)
+class RunCommand:
+    """Run one episode and write DIR/episode.json (and a video if asked)."""
+
+    cfg: Annotated[RunConfig, tyro.conf.arg(name="")] = field(default_factory=RunConfig)
+    config: Path | None = None
+    """YAML/TOML/JSON file with any RunConfig fields; command-line flags override it."""
+    video: Path | None = None
+    """Write an MP4 of the front camera with the planned waypoints drawn on it."""
+    out: Path = Path("runs/latest")
+    """Directory for episode.json."""
+    viewer: bool = False
+    """Open MuJoCo's interactive viewer (needs a display)."""
+
+
+def _parse_run(argv: list[str]) -> RunCommand:
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--config", type=Path)
+    known, _ = pre.parse_known_args(argv)
+    base = RunConfig()
+    if known.config is not None:
+        base = load_config_file(known.config)
+    return tyro.cli(RunCommand, args=argv, default=RunCommand(cfg=base, config=known.config), prog="tcot run")
+
+
+def cmd_run(argv: list[str]) -> int:
+    from tqdm import tqdm
+
+    from tcot_hybrid.episode import EpisodeRunner, write_record
+    from tcot_hybrid.video import EpisodeVideo
+
+    cmd = _parse_run(argv)
+    if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
+                        "use --video out.mp4 to record the episode instead")
+    runner = EpisodeRunner(cmd.cfg)
+    video = EpisodeVideo(runner, cmd.video) if cmd.video else None
+    if video:
+        runner.frame_hook = video.capture
+    viewer = None
+    if cmd.viewer:
+        import mujoco.viewer
+
+        viewer = mujoco.viewer.launch_passive(runner.stack.sim.model, runner.stack.sim.data)
+        previous = runner.frame_hook
+        def sync(r, step):  # noqa: E306
+            if previous:
+                previous(r, step)
+            viewer.sync()
+        runner.frame_hook = sync
+    total = int(round(runner.stack.task.time_limit_s / cmd.cfg.timing.plan_dt))
+    record: dict | None = None
+    try:
+        with tqdm(total=total, desc=cmd.cfg.task, unit="step", leave=False, disable=None) as bar:
+            record = runner.run(progress=bar)
+    finally:
+        if record is None:  # aborted: still leave a record
+            record = runner.record(0.0)
+            record["fault"] = record.get("fault") or "aborted"
+            record["success"] = False
+        path = write_record(record, cmd.out)
+        if video:
+            video.close()
+        if viewer:
+            viewer.close()
+    print(f"{record['task']} seed={record['seed']} robot={record['robot']} controller={record['controller']} "
+          f"ik={record['ik']} planner={record['planner']}: {'SUCCESS' if record['success'] else 'failure'} "
+          f"in {record['sim_time_s']:.1f}s sim / {record['wall_time_s']:.1f}s wall, "
+          f"{len(record['events'])} events -> {path}" + (f", video {cmd.video}" if cmd.video else ""))
+    return 0
+
+
+# --- tcot eval ----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, kw_only=True)
+class EvalCommand:
+    """Evaluate planners × modes over tasks and seeds (parallel, resumable); writes DIR/eval.json + eval.md."""
+
+    cfg: Annotated[RunConfig, tyro.conf.arg(name="")] = field(default_factory=RunConfig)
+    config: Path | None = None
+    """YAML/TOML/JSON file with RunConfig fields shared by every episode."""
+    suite: str | None = None
+    """Evaluate every task of this suite (default: all suites)."""
+    tasks: str | None = None
+    """Comma-separated task names (instead of --suite)."""
+    planners: str | None = None
+    """Comma-separated planners (default: --planner)."""
+    modes: str = "global"
+    """Comma-separated supervisor modes."""
+    perturb: str = "none"
+    """Perturbation to inject (perturbations land with the GLSR issue; only 'none' exists yet)."""
+    robots: str | None = None
+    """Comma-separated robots (default: --robot)."""
+    controllers: str | None = None
+    """Comma-separated controllers (default: --controller)."""
+    iks: str | None = None
+    """Comma-separated IK backends (default: --ik)."""
+    episodes: int = 20
+    """Seeds per cell."""
+    seed_start: int = 1000
+    """First seed; seeds are seed_start .. seed_start + episodes - 1."""
+    workers: int = 2
+    """Worker processes."""
+    out: Path = Path("runs/eval")
+    """Output directory (re-running with the same DIR resumes)."""
+
+
+def _split(value: str | None, default: str) -> list[str]:
+    return [v.strip() for v in (value or default).split(",") if v.strip()]
+
+
+def cmd_eval(argv: list[str]) -> int:
+    from tcot_hybrid.episode import validate_names
+    from tcot_hybrid.errors import ConfigError, unknown_name
+    from tcot_hybrid.evaluation import evaluate, make_jobs
+    from tcot_hybrid.tasks import SUITES, list_tasks
+
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--config", type=Path)
+    known, _ = pre.parse_known_args(argv)
+    base = load_config_file(known.config) if known.config else RunConfig()
+    cmd = tyro.cli(EvalCommand, args=argv, default=EvalCommand(cfg=base, config=known.config), prog="tcot eval")
+    if cmd.suite and cmd.tasks:
+        raise ConfigError("give --suite or --tasks, not both")
+    all_tasks = list_tasks()
+    if cmd.suite is not None and cmd.suite not in SUITES:
+        raise ConfigError(unknown_name("suite", cmd.suite, SUITES))
+    tasks = ([t.name for t in all_tasks if t.suite == cmd.suite] if cmd.suite else
+             _split(cmd.tasks, ",".join(t.name for t in all_tasks)))
+    if cmd.perturb != "none":
+        raise ConfigError(unknown_name("perturbation", cmd.perturb, ["none"]))
+    if cmd.episodes < 1 or cmd.workers < 1 or cmd.seed_start < 0:
+        raise ConfigError(f"--episodes and --workers must be >= 1 and --seed-start >= 0; got "
+                          f"{cmd.episodes}, {cmd.workers}, {cmd.seed_start}")
+    jobs = make_jobs(cmd.cfg, tasks=tasks, planners=_split(cmd.planners, cmd.cfg.planner),
+                     modes=_split(cmd.modes, "global"), robots=_split(cmd.robots, cmd.cfg.robot),
+                     controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
+                     episodes=cmd.episodes, seed_start=cmd.seed_start, perturb=cmd.perturb)
+    seen = set()
+    for j in jobs:  # every name checked before any episode runs
+        key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
+        if key not in seen:
+            seen.add(key)
+            validate_names(j.cfg)
+    result = evaluate(jobs, cmd.out, workers=cmd.workers)
+    tot = sum(c["successes"] for c in result["cells"])
+    print(f"{tot}/{result['episodes']} episodes succeeded across {len(result['cells'])} cells in "
+          f"{result['wall_time_s']:.1f}s with {cmd.workers} workers -> {cmd.out / 'eval.json'}")
+    return 0
+
+
+# --- tcot bench ---------------------------------------------------------------------------------------
+
+def cmd_bench(argv: list[str]) -> int:
+    from tcot_hybrid.bench import markdown, run_bench, update_readme_section
+
+    p = argparse.ArgumentParser(prog="tcot bench", description="speed and memory figures (medians with spread, "
+                                "ratios measured in the same run); writes DIR/bench.json and DIR/bench.md")
+    p.add_argument("--quick", action="store_true", help="fewer repeats (under a minute)")
+    p.add_argument("--out", type=Path, default=Path("runs/bench"), help="output directory")
+    p.add_argument("--robot", default="panda", help="robot to measure")
+    p.add_argument("--readme", type=Path, default=None,
+                   help="also write the tables into this README's <!-- bench:start/end --> section")
+    args = p.parse_args(argv)
+    from tcot_hybrid.robot import load_robot_spec
+
+    load_robot_spec(args.robot)
+    command = "tcot bench " + " ".join(argv)
+    result = run_bench(args.out, quick=args.quick, robot=args.robot, command=command.strip())
+    if args.readme:
+        update_readme_section(args.readme, "bench", markdown(result))
+    for k, v in result["ratios"].items():
+        print(f"{k}: {v}")
+    print(f"-> {args.out / 'bench.json'}")
+    return 0
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_bench}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: tcot {" + ",".join(COMMANDS) + "} ...\n\n" + __doc__.strip())
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"error: unknown command {name!r}; valid commands: {', '.join(COMMANDS)}", file=sys.stderr)
+        return 2
+    try:
+        return COMMANDS[name](rest)
+    except TcotError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,203 @@
+"""One episode end to end: build the stack from a RunConfig, run planner steps, write the record.
+
+The record (``episode.json``) is written even when the episode aborts, and a faulted episode is never
+reported as a success.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid import __version__
+from tcot_hybrid.camera import CameraModel
+from tcot_hybrid.controllers import make_controller
+from tcot_hybrid.dynamics import MujocoArmDynamics
+from tcot_hybrid.errors import SimulationError
+from tcot_hybrid.executor import MotionExecutor
+from tcot_hybrid.ik import make_ik
+from tcot_hybrid.planners import Observation, PlannerContext, check_planner_name, make_planner
+from tcot_hybrid.robot import load_robot_spec
+from tcot_hybrid.run_config import RunConfig
+from tcot_hybrid.safety import SafetyLayer
+from tcot_hybrid.sim import Simulation
+from tcot_hybrid.smoothing import JointSmoother
+from tcot_hybrid.tasks import make_task
+
+SETTLE_S = 0.2  # [s] objects settle (robot holding home) before the first planner step
+
+
+def file_digest(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+@dataclass
+class Stack:
+    """Every stage of the motion stack for one episode, wired together."""
+
+    cfg: RunConfig
+    robot: object
+    task: object
+    sim: Simulation
+    camera: CameraModel
+    executor: MotionExecutor
+    planner: object
+    extra: dict = field(default_factory=dict)
+
+
+def validate_names(cfg: RunConfig) -> None:
+    """Fail on any unknown name before anything is built (each error lists the valid names)."""
+    from tcot_hybrid.controllers import list_controllers
+    from tcot_hybrid.errors import ControllerError, unknown_name
+    from tcot_hybrid.ik import list_ik
+
+    make_task(cfg.task)
+    load_robot_spec(cfg.robot)
+    if cfg.controller not in list_controllers():
+        raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
+    if cfg.ik not in list_ik():
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(unknown_name("ik backend", cfg.ik, list_ik()))
+    check_planner_name(cfg.planner)
+
+
+def build_stack(cfg: RunConfig) -> Stack:
+    validate_names(cfg)
+    robot = load_robot_spec(cfg.robot)
+    task = make_task(cfg.task)
+    sim = Simulation(robot, task, timing=cfg.timing, scene=cfg.scene)
+    sim.reset(np.random.default_rng(cfg.seed))
+    px = cfg.scene.planner_image_px
+    camera = CameraModel.from_mujoco(sim.model, sim.data, cfg.scene.planner_camera, width=px, height=px)
+    dyn = MujocoArmDynamics(sim.model, sim.data, robot)
+    smoother = JointSmoother.from_spec(robot, ctrl_dt=cfg.timing.ctrl_dt, config=cfg.smoothing)
+    smoother.reset(sim.q)
+    controller = make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt,
+                                 params=cfg.controller_params)
+    safety = SafetyLayer(robot)
+    ik = make_ik(cfg.ik, robot, cfg.ik_params)
+    executor = MotionExecutor(sim, ik=ik, smoother=smoother, controller=controller, safety=safety,
+                              dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
+    ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name,
+                         options={"oracle": cfg.oracle, "checkpoint": cfg.checkpoint})
+    planner = make_planner(cfg.planner, ctx)
+    return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)
+
+
+class EpisodeRunner:
+    """Runs one episode step by step (the CLI, the evaluator, the bench and the examples share it)."""
+
+    def __init__(self, cfg: RunConfig, *, frame_hook=None):
+        self.cfg = cfg
+        self.stack = build_stack(cfg)
+        self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
+        self.steps = 0
+        self.success = False
+        self.fault: str | None = None
+        self.plans: list = []
+
+    def observe(self, step: int) -> Observation:
+        s = self.stack
+        image = depth = None
+        if s.planner.needs_image:
+            px = self.cfg.scene.planner_image_px
+            image = s.sim.render(self.cfg.scene.planner_camera, px, px)
+        return Observation(step=step, image=image, depth_m=depth, q=s.sim.q,
+                           gripper_closed=s.sim.gripper_closed_cmd(), instruction=s.task.instruction)
+
+    def settle(self) -> None:
+        ex = self.stack.executor
+        for _ in range(round(SETTLE_S / self.cfg.timing.ctrl_dt)):
+            ex.tick()
+
+    def wants_plan(self, step: int) -> str | None:
+        sup = self.cfg.supervisor
+        if step == 0:
+            return sup.mode
+        if sup.mode == "local" and step % sup.t_l == 0:
+            return "local"
+        return None
+
+    def run(self, progress=None) -> dict:
+        s, cfg = self.stack, self.cfg
+        t0 = time.perf_counter()
+        ex = s.executor
+        max_steps = int(round(s.task.time_limit_s / cfg.timing.plan_dt))
+        ticks = cfg.timing.ticks_per_plan
+        self.settle()
+        try:
+            for step in range(max_steps):
+                mode = self.wants_plan(step)
+                if mode is not None:
+                    plan = s.planner.plan(self.observe(step), mode=mode)
+                    if ex.set_plan(plan):
+                        self.plans.append(plan)
+                for _ in range(ticks):
+                    ex.tick()
+                    if s.sim.fault is not None:
+                        break
+                self.steps = step + 1
+                if self.frame_hook is not None:
+                    self.frame_hook(self, step)
+                if progress is not None:
+                    progress.update(1)
+                if s.sim.fault is not None:
+                    self.fault = f"sim_fault:{s.sim.fault.warning}"
+                    ex.event("sim_fault", warning=s.sim.fault.warning, count=s.sim.fault.count)
+                    break
+                if s.task.success(s.sim.world):
+                    self.success = True
+                    break
+        except SimulationError as exc:
+            self.fault = f"sim_fault:{exc}"
+        wall = time.perf_counter() - t0
+        return self.record(wall)
+
+    def record(self, wall_time_s: float) -> dict:
+        s, cfg = self.stack, self.cfg
+        ex = s.executor
+        success = bool(self.success and self.fault is None and s.sim.fault is None)
+        return {
+            "task": cfg.task, "suite": s.task.suite, "instruction": s.task.instruction,
+            "robot": cfg.robot, "controller": cfg.controller, "ik": cfg.ik, "planner": cfg.planner,
+            "mode": cfg.supervisor.mode, "seed": cfg.seed,
+            "success": success, "fault": self.fault,
+            "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
+            "steps": self.steps, "plans": len(self.plans),
+            "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
+            "max_velocity_ratio": float(ex.max_velocity_ratio),
+            "max_tracking_error_rad": float(ex.tracking_err_max),
+            "ik_failures": ex.ik_failures,
+            "safety": ex.safety.summary(),
+            "events": ex.events + ex.safety.event_dicts(),
+            "config": cfg.to_dict(), "config_hash": cfg.digest(),
+            "robot_model_hash": file_digest(s.robot.mjcf_path),
+            "checkpoint_hash": file_digest(cfg.checkpoint) if cfg.checkpoint else None,
+            "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
+                         "python": platform.python_version()},
+        }
+
+
+def write_record(record: dict, out_dir: str | Path) -> Path:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "episode.json"
+    path.write_text(json.dumps(record, indent=2, default=_json_default))
+    return path
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

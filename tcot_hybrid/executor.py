@@ -1,0 +1,189 @@
+"""Motion stack: WaypointPlan → lift → IK → Ruckig → controller → safety → simulation, one tick at a time.
+
+Data flows one way. The executor owns the current plan and the waypoint it is heading for:
+- pass-through waypoints are blended: the next one is activated ``blend_time_s`` before the current
+  Ruckig segment ends, and Ruckig retargets online from the moving reference state;
+- a waypoint whose gripper bit differs from the current gripper command (and the last waypoint) is a
+  stop: the arm arrives, the gripper switches, and the arm holds still for ``gripper_settle_s``.
+Every anomaly (rejected plan, IK not converged, slow arrival, safety fault) becomes an event.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tcot_hybrid.camera import CameraModel
+from tcot_hybrid.config import require_nonnegative, require_positive
+from tcot_hybrid.errors import LiftError, TcotError, TrajectoryError
+from tcot_hybrid.ik import IKSolver, IKTarget
+from tcot_hybrid.lift import LiftConfig, lift_waypoints
+from tcot_hybrid.plan import WaypointPlan
+from tcot_hybrid.robot import R_DOWN
+from tcot_hybrid.sim import Simulation
+
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExecutorConfig:
+    """How plans are turned into motion.
+
+    blend_time_s:     activate the next pass-through waypoint this long before the current segment
+                      ends [s]. Up: smoother, faster, corners cut more; 0: stop at every waypoint.
+    reach_tol_m:      TCP distance to a stop waypoint that counts as arrived [m]. Down: more precise
+                      grasps, more waiting.
+    reach_timeout_s:  after the reference has arrived, wait at most this long for the TCP [s]; then
+                      go on anyway and log a ``slow_arrival`` event.
+    gripper_settle_s: hold still this long after switching the gripper [s]. Up: firmer grasps before
+                      moving; down: faster episodes.
+    resync_tol_rad:   if the reference and the measured joints differ by more than this when a new plan
+                      arrives (e.g. after a push), restart the reference from the measured state [rad].
+    """
+
+    blend_time_s: float = 0.15
+    reach_tol_m: float = 0.008
+    reach_timeout_s: float = 1.0
+    gripper_settle_s: float = 0.5
+    resync_tol_rad: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s"):
+            require_nonnegative(name, getattr(self, name))
+        require_positive("reach_tol_m", self.reach_tol_m)
+        require_positive("resync_tol_rad", self.resync_tol_rad)
+
+
+class MotionExecutor:
+    """Executes waypoint plans on the simulated robot at ``ctrl_dt``."""
+
+    def __init__(self, sim: Simulation, *, ik: IKSolver, smoother, controller, safety, dynamics,
+                 camera: CameraModel, config: ExecutorConfig = ExecutorConfig(),
+                 lift_config: LiftConfig = LiftConfig()):
+        self.sim, self.ik, self.smoother, self.controller = sim, ik, smoother, controller
+        self.safety, self.dyn, self.camera, self.config, self.lift_config = safety, dynamics, camera, config, lift_config
+        self.substeps = sim.timing.substeps
+        self.ctrl_dt = sim.timing.ctrl_dt
+        self.events: list[dict] = []
+        self.plan: WaypointPlan | None = None
+        self.points: np.ndarray = np.zeros((0, 3))
+        self.grip: np.ndarray = np.zeros(0, bool)
+        self.index = -1
+        self.phase = "idle"  # idle | move | settle | done
+        self._phase_until = 0.0
+        self._arrived_at: float | None = None
+        self._ik_seed = sim.q
+        self._last_tau = np.zeros(sim.robot.dof)
+        self.ik_failures = 0
+        self.tracking_err_max = 0.0
+        self.max_joint_limit_violation = 0.0
+        self.max_velocity_ratio = 0.0
+        self._q_min, self._q_max, self._v_max = sim.robot.q_min, sim.robot.q_max, sim.robot.v_max
+
+    # --- events -----------------------------------------------------------------------------------
+    def event(self, kind: str, **info) -> None:
+        self.events.append({"t": round(float(self.sim.data.time), 4), "kind": kind, **info})
+
+    # --- plans ------------------------------------------------------------------------------------
+    def set_plan(self, plan: WaypointPlan) -> bool:
+        """Lift and adopt a plan; a plan that cannot be lifted is rejected and the old one kept."""
+        try:
+            points = lift_waypoints(plan.uv_px, plan.depth_m, self.camera, config=self.lift_config)
+        except LiftError as exc:
+            self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
+            return False
+        self.plan, self.points, self.grip = plan, points, np.asarray(plan.gripper_closed, bool)
+        q = self.sim.q
+        ref_q = self.smoother.reference.q
+        if np.max(np.abs(ref_q - q)) > self.config.resync_tol_rad:
+            self.event("reference_resynced", max_dev_rad=float(np.max(np.abs(ref_q - q))))
+            try:
+                self.smoother.reset(q, self.sim.qd)
+            except TrajectoryError as exc:  # e.g. pushed slightly past a soft joint limit: brake from there
+                self.event("reference_brake", reason=str(exc))
+                self.smoother.brake(q, self.sim.qd)
+            self._ik_seed = q
+        self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan))
+        self._activate(0)
+        return True
+
+    def _is_stop(self, i: int) -> bool:
+        return i == len(self.points) - 1 or bool(self.grip[i]) != self.sim.gripper_closed_cmd()
+
+    def _activate(self, i: int) -> None:
+        self.index, self.phase, self._arrived_at = i, "move", None
+        target = IKTarget(pos=self.points[i], rot=R_DOWN)
+        try:
+            res = self.ik.solve(target, self._ik_seed)
+        except TcotError as exc:  # bad input: keep holding, report
+            self.event("ik_error", waypoint=i, reason=str(exc))
+            self.phase = "done"
+            return
+        if not res.converged:
+            self.ik_failures += 1
+            self.event("ik_not_converged", waypoint=i, status=res.status, pos_err_m=round(res.pos_err, 5),
+                       rot_err_rad=round(res.rot_err, 5))
+        self._ik_seed = res.q
+        self.smoother.set_target(res.q)
+
+    def _advance(self, t: float) -> None:
+        if self.phase == "settle":
+            if t >= self._phase_until:
+                self._next()
+            return
+        if self.phase != "move":
+            return
+        i = self.index
+        if not self._is_stop(i):
+            if self.smoother.time_remaining <= self.config.blend_time_s:
+                self._next()
+            return
+        if not self.smoother.done:
+            return
+        if self._arrived_at is None:
+            self._arrived_at = t
+        err = float(np.linalg.norm(self.sim.tcp_pos() - self.points[i]))
+        if err > self.config.reach_tol_m and t - self._arrived_at < self.config.reach_timeout_s:
+            return
+        if err > self.config.reach_tol_m:
+            self.event("slow_arrival", waypoint=i, tcp_err_m=round(err, 4))
+        if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
+            self.sim.set_gripper(bool(self.grip[i]))
+            self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
+            self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
+        else:
+            self.phase = "done"
+
+    def _next(self) -> None:
+        if self.index + 1 < len(self.points):
+            self._activate(self.index + 1)
+        else:
+            self.phase = "done"
+
+    @property
+    def plan_finished(self) -> bool:
+        return self.phase in ("done", "idle")
+
+    # --- control ----------------------------------------------------------------------------------
+    def switch_controller(self, controller) -> None:
+        """Bumpless switch: the new controller starts from the measured state and the last torque."""
+        controller.reset(self.dyn, self._last_tau)
+        self.event("controller_switched", old=self.controller.name, new=controller.name)
+        self.controller = controller
+
+    def tick(self) -> None:
+        """One control period: waypoint logic, reference, controller, safety, physics."""
+        sim = self.sim
+        self._advance(float(sim.data.time))
+        ref = self.smoother.step()
+        sim.step1()
+        self.dyn.update()
+        cmd = self.controller.compute(self.dyn, ref)
+        safe = self.safety.filter(cmd, self.dyn, ref)
+        self._last_tau = safe.tau
+        self.dyn.write_ctrl(safe.tau)
+        sim.step2(self.substeps - 1)
+        q, qd = sim.data.qpos[sim.arm_qpos], sim.data.qvel[sim.arm_dof]
+        viol = max(float(np.max(self._q_min - q)), float(np.max(q - self._q_max)), 0.0)
+        self.max_joint_limit_violation = max(self.max_joint_limit_violation, viol)
+        self.max_velocity_ratio = max(self.max_velocity_ratio, float(np.max(np.abs(qd) / self._v_max)))
+        self.tracking_err_max = max(self.tracking_err_max, float(np.max(np.abs(ref.q - q))))

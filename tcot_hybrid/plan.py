@@ -1,0 +1,63 @@
+"""The plan type every planner emits: 2D pixel waypoints in the planner camera + lift cue + gripper bit.
+
+The oracle, the learned planner and any future planner produce exactly this, so the classical half
+of the stack (lift → IK → smoothing → controller) is exercised identically whichever planner runs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tcot_hybrid.errors import PlanningError
+
+PLAN_KINDS = ("global", "local", "direct")
+
+
+@dataclass(frozen=True, kw_only=True)
+class WaypointPlan:
+    """Waypoints in the planner camera image.
+
+    uv_px:          (N, 2) pixel coordinates (u right, v down) [px]
+    depth_m:        (N,) lift cue: depth along the planner camera's optical axis (OpenCV z) [m]
+    gripper_closed: (N,) gripper command to hold from this waypoint on (True = closed)
+    camera:         name of the planner camera the pixels live in
+    kind:           "global" (whole task), "local" (short horizon) or "direct" (one-step action)
+    step:           planner step at which the plan was made
+    """
+
+    uv_px: np.ndarray
+    depth_m: np.ndarray
+    gripper_closed: np.ndarray
+    camera: str
+    kind: str
+    step: int = 0
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        uv = np.asarray(self.uv_px, dtype=float)
+        depth = np.asarray(self.depth_m, dtype=float)
+        grip = np.asarray(self.gripper_closed)
+        if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] == 0:
+            raise PlanningError(f"uv_px must have shape (N>=1, 2), got {uv.shape}")
+        n = uv.shape[0]
+        if depth.shape != (n,):
+            raise PlanningError(f"depth_m must have shape ({n},) to match uv_px, got {depth.shape}")
+        if grip.shape != (n,):
+            raise PlanningError(f"gripper_closed must have shape ({n},) to match uv_px, got {grip.shape}")
+        bad = np.flatnonzero(~np.isfinite(uv).all(axis=1) | ~np.isfinite(depth))
+        if bad.size:
+            i = int(bad[0])
+            raise PlanningError(
+                f"waypoint {i} is not finite: uv_px={uv[i].tolist()}, depth_m={depth[i]} "
+                f"({bad.size} of {n} waypoints bad)"
+            )
+        if self.kind not in PLAN_KINDS:
+            raise PlanningError(f"plan kind {self.kind!r} is not one of {', '.join(PLAN_KINDS)}")
+        for name, arr in (("uv_px", uv), ("depth_m", depth), ("gripper_closed", grip.astype(bool))):
+            arr = np.array(arr)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    def __len__(self) -> int:
+        return int(self.uv_px.shape[0])

@@ -1,0 +1,57 @@
+"""Planner registry: one place that knows how to build each planner by name."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from tcot_hybrid.camera import CameraModel
+from tcot_hybrid.errors import ConfigError, unknown_name
+from tcot_hybrid.planners.base import MODES, Observation, Planner
+from tcot_hybrid.tasks import Task, World
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerContext:
+    """Everything a planner factory may use. Only the oracle may read ``world`` (privileged)."""
+
+    task: Task
+    world: World
+    camera: CameraModel
+    robot_name: str
+    options: dict[str, Any]
+
+
+_FACTORIES: dict[str, Callable[[PlannerContext], Planner]] = {}
+
+
+def register_planner(name: str):
+    def deco(factory: Callable[[PlannerContext], Planner]):
+        _FACTORIES[name] = factory
+        return factory
+    return deco
+
+
+def list_planners() -> list[str]:
+    return sorted(_FACTORIES)
+
+
+def check_planner_name(name: str) -> None:
+    if name not in _FACTORIES:
+        raise ConfigError(unknown_name("planner", name, _FACTORIES))
+
+
+def make_planner(name: str, ctx: PlannerContext) -> Planner:
+    check_planner_name(name)
+    return _FACTORIES[name](ctx)
+
+
+@register_planner("oracle")
+def _oracle(ctx: PlannerContext) -> Planner:
+    from tcot_hybrid.planners.oracle import OracleConfig, OraclePlanner
+
+    return OraclePlanner(ctx.task, ctx.world, ctx.camera, config=ctx.options.get("oracle", OracleConfig()))
+
+
+__all__ = ["MODES", "Observation", "Planner", "PlannerContext", "list_planners", "make_planner",
+           "register_planner", "check_planner_name"]

@@ -1,0 +1,42 @@
+"""Planner interface: observation in, ``WaypointPlan`` out (and, for learned planners, p(success))."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from tcot_hybrid.plan import WaypointPlan
+
+MODES = ("global", "local")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Observation:
+    """What a planner may see at planner step ``step``.
+
+    image:   planner-camera RGB (H, W, 3) uint8, or None when the planner does not need one
+    depth_m: planner-camera depth (H, W) [m] along the optical axis, or None
+    q:       arm joint positions [rad]
+    gripper_closed: current gripper command
+    instruction: the task's natural-language instruction
+    """
+
+    step: int
+    image: np.ndarray | None
+    depth_m: np.ndarray | None
+    q: np.ndarray
+    gripper_closed: bool
+    instruction: str
+
+
+class Planner(ABC):
+    """Produces waypoint plans. ``needs_image`` tells the episode loop whether to render for it."""
+
+    name: ClassVar[str]
+    needs_image: ClassVar[bool] = True
+
+    @abstractmethod
+    def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
+        """A global (whole task) or local (short horizon from now) plan."""

@@ -1,0 +1,166 @@
+"""The config tree of one run: component configs composed, loadable from YAML/TOML, overridable on the CLI.
+
+Stored files are only a way to write this tree down: loading validates every key (unknown keys and
+wrong types name the field), refuses YAML tags, and then each component's ``__post_init__`` checks
+ranges. Nothing moves before the whole tree is valid.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from tcot_hybrid.config import TimingConfig, require_choice, require_int
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.executor import ExecutorConfig
+from tcot_hybrid.ik import IKConfig
+from tcot_hybrid.lift import LiftConfig
+from tcot_hybrid.planners.oracle import OracleConfig
+from tcot_hybrid.scene import SceneConfig
+from tcot_hybrid.smoothing import SmoothingConfig
+
+MODES = ("global", "local")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SupervisorConfig:
+    """When to plan.
+
+    mode: "global" = one whole-task plan at the first step, followed frozen (paper: global only);
+          "local" = a short-horizon plan every ``t_l`` steps (paper: local only).
+    t_l:  local planning period [planner steps]. Down: reacts faster, more planner calls.
+    """
+
+    mode: str = "global"
+    t_l: int = 5
+
+    def __post_init__(self) -> None:
+        require_choice("supervisor.mode", self.mode, MODES)
+        require_int("supervisor.t_l", self.t_l, minimum=1)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunConfig:
+    """One episode: what to run (names) and how (component configs).
+
+    task/robot/controller/ik/planner: registry names (``tcot list`` shows them).
+    seed: episode seed; the same seed and config give a bit-identical run.
+    controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
+    """
+
+    task: str = "goal_cube_on_plate"
+    seed: int = 0
+    robot: str = "panda"
+    controller: str = "computed_torque"
+    ik: str = "mink"
+    planner: str = "oracle"
+    checkpoint: str | None = None
+    controller_params: dict[str, float] = field(default_factory=dict)
+    timing: TimingConfig = field(default_factory=TimingConfig)
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    ik_params: IKConfig = field(default_factory=IKConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    lift: LiftConfig = field(default_factory=LiftConfig)
+    oracle: OracleConfig = field(default_factory=OracleConfig)
+    supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
+
+    def __post_init__(self) -> None:
+        require_int("seed", self.seed, minimum=0)
+        for name in ("task", "robot", "controller", "ik", "planner"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ConfigError(f"{name} must be a non-empty name, got {getattr(self, name)!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def digest(self) -> str:
+        """Stable hash of the whole config (recorded with every episode)."""
+        blob = json.dumps(self.to_dict(), sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+# --- loading stored configs ---------------------------------------------------------------------------
+
+def _coerce(path: str, tp: Any, value: Any) -> Any:
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return from_mapping(tp, value, prefix=path)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)]
+        return _coerce(path, inner[0], value)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{path} must be a mapping, got {value!r}")
+        _, vt = typing.get_args(tp)
+        return {str(k): _coerce(f"{path}.{k}", vt, v) for k, v in value.items()}
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{path} must be a number, got {value!r} ({type(value).__name__})")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{path} must be an integer, got {value!r} ({type(value).__name__})")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{path} must be true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{path} must be a string, got {value!r} ({type(value).__name__})")
+        return value
+    return value
+
+
+def from_mapping(cls, data: Any, *, prefix: str = ""):
+    """Build dataclass ``cls`` from a plain mapping, naming any unknown key or wrongly typed value."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix or cls.__name__} must be a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - fields)
+    if unknown:
+        where = prefix or "config"
+        raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {', '.join(sorted(fields))}")
+    kwargs = {k: _coerce(f"{prefix}.{k}" if prefix else k, hints[k], v) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise ConfigError(f"{prefix or cls.__name__}: {exc}") from exc
+
+
+def load_config_file(path: str | Path) -> RunConfig:
+    """Load a RunConfig from .yaml/.yml/.toml/.json; errors name the file and the field."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"config file {str(p)!r} does not exist")
+    text = p.read_text()
+    try:
+        if p.suffix in (".yaml", ".yml"):
+            data = yaml.safe_load(text)  # safe_load refuses python object tags
+        elif p.suffix == ".toml":
+            data = tomllib.loads(text)
+        elif p.suffix == ".json":
+            data = json.loads(text)
+        else:
+            raise ConfigError(f"config file {str(p)!r}: unknown format {p.suffix!r}; use .yaml, .toml or .json")
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"config file {str(p)!r} is malformed: {exc}") from exc
+    if data is None:
+        data = {}
+    try:
+        return from_mapping(RunConfig, data)
+    except ConfigError as exc:
+        raise ConfigError(f"config file {str(p)!r}: {exc}") from exc

@@ -1,0 +1,140 @@
+"""Workcell scene: table, lights, cameras and task objects around a robot, built with MjSpec.
+
+The robot's own MJCF is the base spec; the scene adds to it, so robot names stay unprefixed. Rendering
+settings are chosen for software rendering (EGL/llvmpipe): no shadows, no reflections, no
+multisampling, few simple geoms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.config import require_int, require_positive
+
+GEOM = mujoco.mjtGeom
+TABLE_TOP_Z = 0.0  # [m] the table surface is the world's z = 0 plane (robot base sits on it)
+
+# Object collision tuning: soft enough to be stable at sim_dt = 2 ms, grippy enough for friction grasps.
+OBJECT_FRICTION = (1.0, 0.01, 0.001)
+OBJECT_SOLREF = (0.01, 1.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneConfig:
+    """Scene and camera settings.
+
+    planner_camera: camera whose image the planner sees and whose pixels waypoints live in.
+    planner_image_px: square planner image size [px]; larger = finer waypoints, slower render/training.
+    video_width/height: size of recorded videos [px]; bigger costs render time only when recording.
+    """
+
+    planner_camera: str = "agentview"
+    planner_image_px: int = 128
+    video_width: int = 320
+    video_height: int = 240
+
+    def __post_init__(self) -> None:
+        require_int("planner_image_px", self.planner_image_px, minimum=16)
+        require_int("video_width", self.video_width, minimum=16)
+        require_int("video_height", self.video_height, minimum=16)
+        if self.planner_camera not in CAMERAS:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(
+                f"planner_camera = {self.planner_camera!r} is not a scene camera; choose one of {', '.join(CAMERAS)}"
+            )
+
+
+# name -> (position [m], look-at point [m], vertical field of view [deg])
+CAMERAS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {
+    # Front camera facing the robot from across the table, steep enough that the workspace fills the image.
+    "agentview": ((1.0, 0.0, 1.0), (0.55, 0.0, 0.05), 52.0),
+    # Side camera (second view for triangulation and for watching depth errors).
+    "sideview": ((0.5, -1.05, 0.55), (0.5, 0.0, 0.05), 50.0),
+}
+
+
+def look_at_xyaxes(pos, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """MuJoCo camera ``xyaxes`` (camera looks along its -z, y up) for a camera at pos looking at target."""
+    pos, target, up = (np.asarray(v, dtype=float) for v in (pos, target, up))
+    forward = target - pos
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    cam_up = np.cross(right, forward)
+    return np.concatenate([right, cam_up])
+
+
+def add_geom(body, *, type, size, pos=(0, 0, 0), rgba=(0.7, 0.7, 0.7, 1), name="", mass=None, quat=None,
+             friction=OBJECT_FRICTION, condim=4):
+    g = body.add_geom()
+    g.name = name
+    g.type = type
+    g.size = np.resize(np.asarray(size, dtype=float), 3)
+    g.pos = pos
+    g.rgba = rgba
+    g.friction = friction
+    g.condim = condim
+    g.solref = OBJECT_SOLREF
+    if quat is not None:
+        g.quat = quat
+    if mass is not None:
+        g.mass = mass
+    return g
+
+
+def add_free_body(spec: mujoco.MjSpec, name: str, pos=(0.5, 0.0, 0.05)):
+    body = spec.worldbody.add_body()
+    body.name = name
+    body.pos = pos
+    joint = body.add_freejoint()
+    joint.name = f"{name}_free"
+    return body
+
+
+def build_workcell(robot_spec_mj: mujoco.MjSpec, *, config: SceneConfig, sim_dt: float) -> mujoco.MjSpec:
+    """Add table, lights, cameras and render settings to the robot's spec (in place) and return it."""
+    require_positive("sim_dt", sim_dt)
+    spec = robot_spec_mj
+    spec.option.timestep = sim_dt
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0  # stiffer friction: grasped objects slip less
+    spec.visual.quality.shadowsize = 0
+    spec.visual.quality.offsamples = 0
+    spec.visual.global_.offwidth = max(config.video_width, config.planner_image_px, 640)
+    spec.visual.global_.offheight = max(config.video_height, config.planner_image_px, 480)
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+
+    world = spec.worldbody
+    light = world.add_light()
+    light.name = "key"
+    light.pos = [0.6, -0.3, 2.0]
+    light.dir = [-0.1, 0.15, -1.0]
+    light.castshadow = False
+    light.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+
+    table = world.add_body()
+    table.name = "table"
+    add_geom(table, type=GEOM.mjGEOM_BOX, size=(0.65, 0.7, 0.02), pos=(0.4, 0.0, TABLE_TOP_Z - 0.02),
+             rgba=(0.62, 0.55, 0.45, 1), name="table_top", friction=(1.0, 0.005, 0.0001), condim=3)
+    floor = world.add_geom()
+    floor.name = "floor"
+    floor.type = GEOM.mjGEOM_PLANE
+    floor.size = [3, 3, 0.1]
+    floor.pos = [0, 0, -0.75]
+    floor.rgba = [0.3, 0.3, 0.32, 1]
+    floor.contype = 0
+    floor.conaffinity = 0
+
+    for name, (pos, target, fovy) in CAMERAS.items():
+        cam = world.add_camera()
+        cam.name = name
+        cam.pos = pos
+        cam.fovy = fovy
+        cam.alt.type = mujoco.mjtOrientation.mjORIENTATION_XYAXES
+        cam.alt.xyaxes = look_at_xyaxes(pos, target)
+    return spec

@@ -1,0 +1,145 @@
+"""The simulated workcell: compiled MuJoCo model of robot + scene + task objects, stepping and rendering.
+
+Stepping is split (``mj_step1`` → control → ``mj_step2``) so controllers see dynamics quantities of the
+current state at no extra cost. Every step polls MuJoCo's warning counters: MuJoCo silently resets the
+state on divergence, and a reset episode must never be reported as a success.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.config import TimingConfig
+from tcot_hybrid.errors import SimulationError
+from tcot_hybrid.robot import RobotSpec, robot_mjspec
+from tcot_hybrid.scene import SceneConfig, build_workcell
+from tcot_hybrid.tasks import Task, World
+
+# Warnings that mean the physics state can no longer be trusted.
+FATAL_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADCTRL,
+)
+
+
+@dataclass(frozen=True)
+class SimFault:
+    """A physics fault: which MuJoCo warning fired, at what simulated time [s]."""
+
+    time_s: float
+    warning: str
+    count: int
+
+
+class Simulation:
+    """Robot + workcell + task objects, compiled once; ``reset(seed)`` starts a new episode."""
+
+    def __init__(self, robot: RobotSpec, task: Task, *, timing: TimingConfig, scene: SceneConfig):
+        self.robot, self.task, self.timing, self.scene_config = robot, task, timing, scene
+        spec = build_workcell(robot_mjspec(robot), config=scene, sim_dt=timing.sim_dt)
+        self.objects = task.add_objects(spec)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self.arm_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.arm_joints])
+        self.arm_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in robot.arm_joints])
+        self.arm_act = np.array([m.actuator(a).id for a in robot.arm_actuators])
+        self.gripper_act = m.actuator(robot.gripper_actuator).id
+        self.gripper_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.gripper_joints])
+        finger_bodies = {m.jnt_bodyid[m.joint(j).id] for j in robot.gripper_joints}
+        finger_geoms = tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] in finger_bodies)
+        self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms)
+        self.ee_site = m.site(robot.ee_site).id
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._fault: SimFault | None = None
+
+    # --- episode lifecycle ------------------------------------------------------------------------
+    def reset(self, rng: np.random.Generator) -> None:
+        """Robot at home with the gripper open, objects placed by the task (seeded)."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        d.qpos[self.arm_qpos] = self.robot.home_q
+        d.qpos[self.gripper_qpos] = self._finger_open()
+        d.ctrl[self.gripper_act] = self.robot.gripper_open
+        self.task.reset(self.world, rng)
+        mujoco.mj_forward(m, d)
+        self._fault = None
+        d.warning.number[:] = 0
+
+    def _finger_open(self) -> float:
+        j = self.model.joint(self.robot.gripper_joints[0]).id
+        return float(self.model.jnt_range[j][1])
+
+    # --- stepping ---------------------------------------------------------------------------------
+    def step1(self) -> None:
+        mujoco.mj_step1(self.model, self.data)
+
+    def step2(self, n_more: int) -> None:
+        """Finish the current step, then ``n_more`` full steps with the control held."""
+        m, d = self.model, self.data
+        mujoco.mj_step2(m, d)
+        for _ in range(n_more):
+            mujoco.mj_step(m, d)
+        self._poll_warnings()
+
+    def _poll_warnings(self) -> None:
+        if self._fault is not None:
+            return
+        w = self.data.warning
+        for kind in FATAL_WARNINGS:
+            n = int(w[int(kind)].number)
+            if n:
+                self._fault = SimFault(float(self.data.time), kind.name, n)
+                return
+
+    @property
+    def fault(self) -> SimFault | None:
+        return self._fault
+
+    def raise_if_faulted(self) -> None:
+        if self._fault is not None:
+            raise SimulationError(f"simulation diverged at t={self._fault.time_s:.3f}s: {self._fault.warning}")
+
+    def set_gripper(self, closed: bool) -> None:
+        self.data.ctrl[self.gripper_act] = self.robot.gripper_closed if closed else self.robot.gripper_open
+
+    # --- measurements -----------------------------------------------------------------------------
+    @property
+    def q(self) -> np.ndarray:
+        return self.data.qpos[self.arm_qpos].copy()
+
+    @property
+    def qd(self) -> np.ndarray:
+        return self.data.qvel[self.arm_dof].copy()
+
+    def tcp_pos(self) -> np.ndarray:
+        return self.data.site_xpos[self.ee_site].copy()
+
+    def gripper_closed_cmd(self) -> bool:
+        return bool(self.data.ctrl[self.gripper_act] == self.robot.gripper_closed)
+
+    # --- rendering --------------------------------------------------------------------------------
+    def renderer(self, width: int, height: int) -> mujoco.Renderer:
+        key = (width, height)
+        if key not in self._renderers:
+            self._renderers[key] = mujoco.Renderer(self.model, height=height, width=width)
+        return self._renderers[key]
+
+    def render(self, camera: str, width: int, height: int, *, depth: bool = False) -> np.ndarray:
+        r = self.renderer(width, height)
+        r.update_scene(self.data, camera=camera)
+        if depth:
+            r.enable_depth_rendering()
+            img = r.render().copy()
+            r.disable_depth_rendering()
+            return img
+        return r.render().copy()
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()

@@ -1,0 +1,281 @@
+"""Task interface, the privileged world view, layout sampling and the oracle's skills.
+
+A task adds its objects to the scene spec, samples a seeded layout, judges success from simulator
+state, and (for the oracle planner only) scripts itself as a list of skills. Skills read true object
+poses; nothing the learned planner sees comes from here.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.tasks.objects import (
+    STICK_GRIP_FROM_END,
+    STICK_LENGTH,
+    ObjectInfo,
+)
+
+TRAVEL_Z = 0.20  # [m] TCP height for transport moves (clears bowls, baskets and the drawer cabinet)
+APPROACH_DZ = 0.08  # [m] pre-grasp/pre-place height above the target point
+RETREAT_DZ = 0.10  # [m] lift after releasing
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A TCP position [m, world] and the gripper command to hold from here on."""
+
+    pos: np.ndarray
+    closed: bool
+
+
+class World:
+    """Read/write access to the simulated scene by object name (privileged: oracle, predicates, resets)."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, objects: dict[str, ObjectInfo], *,
+                 ee_site: str, finger_geoms: tuple[int, ...]):
+        self.model, self.data, self.objects = model, data, objects
+        self._body = {o.name: model.body(o.body).id for o in objects.values()}
+        self._jnt = {o.name: model.joint(o.joint).id for o in objects.values()}
+        self._site = model.site(ee_site).id
+        self.finger_geoms = frozenset(finger_geoms)
+        self._geoms_of = {
+            name: frozenset(int(g) for g in np.flatnonzero(self._subtree_mask(self._body[name])))
+            for name in objects
+        }
+
+    def _subtree_mask(self, body_id: int) -> np.ndarray:
+        m = self.model
+        in_tree = np.zeros(m.nbody, bool)
+        for b in range(m.nbody):
+            p = b
+            while p > 0 and p != body_id:
+                p = m.body_parentid[p]
+            in_tree[b] = p == body_id
+        return in_tree[m.geom_bodyid]
+
+    def pos(self, name: str) -> np.ndarray:
+        return self.data.xpos[self._body[name]].copy()
+
+    def rot(self, name: str) -> np.ndarray:
+        return self.data.xmat[self._body[name]].reshape(3, 3).copy()
+
+    def joint_q(self, joint: str) -> float:
+        """Position of a 1-dof joint by joint name [m or rad]."""
+        return float(self.data.qpos[self.model.jnt_qposadr[self.model.joint(joint).id]])
+
+    def tcp_pos(self) -> np.ndarray:
+        return self.data.site_xpos[self._site].copy()
+
+    def set_pose(self, name: str, pos, yaw: float = 0.0) -> None:
+        """Place a free object at pos [m] with yaw [rad] about world z, at rest."""
+        j = self._jnt[name]
+        a, v = self.model.jnt_qposadr[j], self.model.jnt_dofadr[j]
+        self.data.qpos[a:a + 3] = pos
+        self.data.qpos[a + 3:a + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
+        self.data.qvel[v:v + 6] = 0.0
+
+    def touching(self, name: str, geoms: frozenset[int]) -> bool:
+        obj = self._geoms_of[name]
+        d = self.data
+        for i in range(d.ncon):
+            g1, g2 = int(d.contact.geom1[i]), int(d.contact.geom2[i])
+            if (g1 in obj and g2 in geoms) or (g2 in obj and g1 in geoms):
+                return True
+        return False
+
+    def is_grasped(self, name: str) -> bool:
+        """True when the object touches the gripper's fingers and is off the table."""
+        o = self.objects[name]
+        return self.touching(name, self.finger_geoms) and self.pos(name)[2] > o.rest_z + 0.01
+
+    def speed(self, name: str) -> float:
+        j = self._jnt[name]
+        v = self.model.jnt_dofadr[j]
+        return float(np.linalg.norm(self.data.qvel[v:v + 3]))
+
+
+def sample_apart(rng: np.random.Generator, regions: dict[str, tuple[float, float, float, float]],
+                 radii: dict[str, float], *, gap: float = 0.02, tries: int = 2000) -> dict[str, np.ndarray]:
+    """Sample xy for each named object in its region (xmin, xmax, ymin, ymax) without overlaps."""
+    for _ in range(tries):
+        out: dict[str, np.ndarray] = {}
+        ok = True
+        for name, (x0, x1, y0, y1) in regions.items():
+            p = np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)])
+            if any(np.linalg.norm(p - q) < radii[name] + radii[n] + gap for n, q in out.items()):
+                ok = False
+                break
+            out[name] = p
+        if ok:
+            return out
+    raise RuntimeError(f"could not place {list(regions)} apart in {tries} tries; regions too small")
+
+
+# --- skills: the oracle's script pieces --------------------------------------------------------------
+
+class Skill(ABC):
+    """One step of an oracle script: done(world) tells whether it is achieved; keyframes() from now."""
+
+    @abstractmethod
+    def done(self, world: World) -> bool: ...
+
+    @abstractmethod
+    def keyframes(self, world: World) -> list[Keyframe]: ...
+
+
+def _kf(x, y, z, closed: bool) -> Keyframe:
+    return Keyframe(np.array([x, y, z], dtype=float), closed)
+
+
+class PickPlace(Skill):
+    """Pick ``obj`` top-down and release it at ``place(world)`` (xy + the object's centre height)."""
+
+    def __init__(self, obj: str, place, achieved, *, grasp_dz: float = 0.0):
+        self.obj, self.place, self.achieved, self.grasp_dz = obj, place, achieved, grasp_dz
+
+    def done(self, world: World) -> bool:
+        return self.achieved(world)
+
+    def keyframes(self, world: World) -> list[Keyframe]:
+        p = world.pos(self.obj)
+        goal = np.asarray(self.place(world), dtype=float)
+        kfs: list[Keyframe] = []
+        if not world.is_grasped(self.obj):
+            gz = p[2] + self.grasp_dz
+            kfs += [_kf(p[0], p[1], max(TRAVEL_Z, gz + APPROACH_DZ), False),
+                    _kf(p[0], p[1], gz + APPROACH_DZ / 2, False),
+                    _kf(p[0], p[1], gz, True),
+                    _kf(p[0], p[1], TRAVEL_Z, True)]
+        else:
+            t = world.tcp_pos()
+            kfs.append(_kf(t[0], t[1], TRAVEL_Z, True))
+        release_z = goal[2] + 0.012  # drop from just above so the object never jams into the surface
+        kfs += [_kf(goal[0], goal[1], TRAVEL_Z, True),
+                _kf(goal[0], goal[1], release_z + APPROACH_DZ / 2, True),
+                _kf(goal[0], goal[1], release_z, False),
+                _kf(goal[0], goal[1], release_z + RETREAT_DZ, False)]
+        return kfs
+
+
+class PullDrawer(Skill):
+    """Grasp the drawer handle top-down and pull it open by ``distance`` [m] along -x."""
+
+    def __init__(self, drawer: str, *, distance: float, achieved):
+        self.drawer, self.distance, self.achieved = drawer, distance, achieved
+
+    def done(self, world: World) -> bool:
+        return self.achieved(world)
+
+    def keyframes(self, world: World) -> list[Keyframe]:
+        h = world.model.geom(f"{self.drawer}_handle").id
+        hp = world.data.geom_xpos[h].copy()
+        remaining = max(self.distance - world.joint_q(f"{self.drawer}_slide"), 0.02)
+        x1 = hp[0] - remaining
+        kfs = [_kf(hp[0], hp[1], hp[2] + APPROACH_DZ + 0.04, False),
+               _kf(hp[0], hp[1], hp[2] + APPROACH_DZ / 2, False),
+               _kf(hp[0], hp[1], hp[2], True)]
+        for f in (0.33, 0.66, 1.0):
+            kfs.append(_kf(hp[0] + (x1 - hp[0]) * f, hp[1], hp[2], True))
+        kfs += [_kf(x1, hp[1], hp[2], False), _kf(x1, hp[1], hp[2] + RETREAT_DZ, False)]
+        return kfs
+
+
+class HookPull(Skill):
+    """Grasp the stick, put its hook behind ``target`` and drag the target toward the robot."""
+
+    def __init__(self, stick: str, target: str, *, pull_to_x: float, achieved):
+        self.stick, self.target, self.pull_to_x, self.achieved = stick, target, pull_to_x, achieved
+
+    def done(self, world: World) -> bool:
+        return self.achieved(world)
+
+    def keyframes(self, world: World) -> list[Keyframe]:
+        s = world.pos(self.stick)
+        axis = world.rot(self.stick)[:, 0]
+        grip = s + axis * STICK_GRIP_FROM_END
+        c = world.pos(self.target)
+        half = world.objects[self.target].half_height
+        # Hook's near face 1.5 cm behind the target's far face; the shaft runs beside the target (on the
+        # stick's side) so that lowering the stick does not land it on top of the target.
+        hook_x = c[0] + half + 0.015 + 0.0125
+        gx = hook_x - (STICK_LENGTH - 0.0125 - STICK_GRIP_FROM_END)
+        side = 1.0 if grip[1] >= c[1] else -1.0
+        gy = c[1] + side * (half + 0.0125 + 0.012)
+        gz_low = grip[2] + 0.004
+        lift_z = 0.09
+        kfs: list[Keyframe] = []
+        if not world.is_grasped(self.stick):
+            kfs += [_kf(grip[0], grip[1], TRAVEL_Z, False),
+                    _kf(grip[0], grip[1], grip[2] + APPROACH_DZ / 2, False),
+                    _kf(grip[0], grip[1], grip[2], True)]
+        kfs += [_kf(grip[0], grip[1], lift_z, True),
+                _kf(gx, gy, lift_z, True),
+                _kf(gx, gy, gz_low, True)]
+        for f in (0.25, 0.5, 0.75, 1.0):
+            kfs.append(_kf(gx + (self.pull_to_x - gx) * f, gy, gz_low, True))
+        kfs += [_kf(self.pull_to_x, gy, gz_low, False), _kf(self.pull_to_x, gy, gz_low + RETREAT_DZ, False)]
+        return kfs
+
+
+class Task(ABC):
+    """A manipulation task: objects, a seeded layout, a success predicate and an oracle script."""
+
+    name: ClassVar[str]
+    suite: ClassVar[str]
+    instruction: ClassVar[str]
+    time_limit_s: ClassVar[float] = 30.0
+
+    @abstractmethod
+    def add_objects(self, spec: mujoco.MjSpec) -> dict[str, ObjectInfo]:
+        """Add this task's bodies to the scene spec; return their descriptions by name."""
+
+    @abstractmethod
+    def reset(self, world: World, rng: np.random.Generator) -> None:
+        """Place the objects for a new episode (seeded)."""
+
+    @abstractmethod
+    def success(self, world: World) -> bool:
+        """Task success from simulator state only."""
+
+    @abstractmethod
+    def skills(self) -> list[Skill]:
+        """The privileged oracle script, in order."""
+
+
+# --- predicate helpers --------------------------------------------------------------------------------
+
+def resting_on(world: World, obj: str, surface: str, *, tol_z: float = 0.015) -> bool:
+    """obj lies on a plate-like surface: inside its radius, at the right height, released and still."""
+    o, s = world.objects[obj], world.objects[surface]
+    p, q = world.pos(obj), world.pos(surface)
+    inside = np.linalg.norm(p[:2] - q[:2]) <= s.inner_half - 0.01
+    height = abs((p[2] - o.half_height) - (q[2] + s.half_height)) <= tol_z
+    return bool(inside and height and not world.is_grasped(obj) and world.speed(obj) < 0.05)
+
+
+def inside_container(world: World, obj: str, container: str) -> bool:
+    """obj is inside a bowl/basket/drawer: within its inner extent, below its rim, released and still."""
+    o, c = world.objects[obj], world.objects[container]
+    p = world.pos(obj)
+    local = world.rot(container).T @ (p - world.pos(container))
+    if c.kind == "bowl":
+        inside_xy = np.linalg.norm(local[:2]) <= c.inner_half - 0.005
+    elif c.kind == "drawer":
+        from tcot_hybrid.tasks.objects import DRAWER_INNER
+
+        inside_xy = abs(local[0] - (0.01 + DRAWER_INNER[0])) <= DRAWER_INNER[0] and abs(local[1]) <= DRAWER_INNER[1]
+    else:
+        inside_xy = np.all(np.abs(local[:2]) <= c.inner_half)
+    below_rim = local[2] - o.half_height <= c.bottom + c.rim_height
+    return bool(inside_xy and below_rim and not world.is_grasped(obj) and world.speed(obj) < 0.05)
+
+
+def stacked_on(world: World, top: str, bottom: str) -> bool:
+    t, b = world.pos(top), world.pos(bottom)
+    ht, hb = world.objects[top].half_height, world.objects[bottom].half_height
+    return bool(np.linalg.norm(t[:2] - b[:2]) <= min(ht, hb) and abs(t[2] - b[2] - ht - hb) <= 0.01
+                and not world.is_grasped(top) and world.speed(top) < 0.05)
