@@ -14,6 +14,8 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import pkgutil
+import types
+import typing
 from collections.abc import Mapping
 from typing import Any
 
@@ -46,8 +48,9 @@ def register(cls: type[Controller]) -> type[Controller]:
     if not isinstance(name, str) or not name:
         raise ControllerError(f"controller class {cls.__name__} needs a non-empty class attribute `name`")
     other = _REGISTRY.get(name)
-    if other is not None and other is not cls and other.__qualname__ != cls.__qualname__:
-        raise ControllerError(f"controller name {name!r} is registered twice ({other.__name__}, {cls.__name__})")
+    where = lambda c: f"{c.__module__}.{c.__qualname__}"  # noqa: E731
+    if other is not None and where(other) != where(cls):  # same class re-imported is fine
+        raise ControllerError(f"controller name {name!r} is registered twice ({where(other)}, {where(cls)})")
     _REGISTRY[name] = cls
     return cls
 
@@ -97,7 +100,7 @@ def make_controller(name: str, spec: Any, *, ctrl_dt: float, config: ControllerC
     else:
         raise ConfigError(f"config for controller {name!r} must be a {cfg_cls.__name__} or a mapping, "
                           f"got {type(config).__name__}")
-    merged = {**base, **dict(params or {})}
+    merged = {**base, **_coerce(cfg_cls, dict(params or {}))}
     valid = [f.name for f in dataclasses.fields(cfg_cls)]
     unknown = sorted(set(merged) - set(valid))
     if unknown:
@@ -107,3 +110,22 @@ def make_controller(name: str, spec: Any, *, ctrl_dt: float, config: ControllerC
     except TypeError as exc:
         raise ConfigError(f"bad {name} controller config {merged!r}: {exc}") from exc
     return cls(spec, ctrl_dt=ctrl_dt, config=cfg)
+
+
+def _coerce(cfg_cls: type, params: dict) -> dict:
+    """Lossless conversions for values typed as floats by a CLI (``horizon 12.0`` → 12, ``1.0`` → True).
+
+    Anything else is passed through unchanged for the config's own validation to accept or refuse.
+    """
+    hints = typing.get_type_hints(cfg_cls)
+    out = {}
+    for key, value in params.items():
+        hint = hints.get(key)
+        allowed = set(typing.get_args(hint)) if isinstance(hint, types.UnionType) else {hint}
+        if isinstance(value, float) and value.is_integer():
+            if bool in allowed and value in (0.0, 1.0):
+                value = bool(value)
+            elif int in allowed:
+                value = int(value)
+        out[key] = value
+    return out

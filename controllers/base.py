@@ -63,7 +63,8 @@ class Command(NamedTuple):
     status:       ``"ok"``, ``"blending"`` (bumpless switch in progress) or ``"fallback"`` (the law
                   failed, e.g. MPC solver status / timeout / non-finite, and a PD position hold was
                   returned instead).
-    detail:       why, for ``"fallback"`` (solver status name, timing); empty otherwise.
+    detail:       why, for ``"fallback"`` (solver status name, timing); a note for an accepted but
+                  degraded result (MPC: ``"osqp status solved_inaccurate"``); empty otherwise.
     solve_time_s: time spent in an optimiser this tick [s] (0 for closed-form laws).
     """
 
@@ -105,7 +106,7 @@ class JointGainsConfig(ControllerConfig):
     kd_scale: multiplies kd [-]; turn up for more damping, down if it chatters.
     compensate_passive: also cancel the model's passive joint forces (MuJoCo ``qfrc_passive``: joint
               damping) [on/off]. On = tracks like the ideal law; off = treat them as unmodelled
-              friction (more lag, ~10 mrad on the Panda wrist at 0.5 rad/s).
+              friction (measured: 5 mrad peak lag instead of 0.4 on a 0.3 rad / 1 s Panda move).
     """
 
     kp: tuple[float, ...] | None = None
@@ -293,11 +294,10 @@ def bias_attr(cfg: Any) -> str:
 
 
 def pd_hold_torque(dyn: Any, q_hold: np.ndarray, kp: np.ndarray, kd: np.ndarray, bias: np.ndarray) -> np.ndarray:
-    """Position hold: tau = I_eff (kp (q_hold - q) - kd qd) + bias [Nm], I_eff = 1/diag(M^-1).
-
-    Non-finite inertia falls back to bias only (caller checks finiteness of the result).
-    """
-    inertia = effective_joint_inertia(dyn.M) if np.all(np.isfinite(dyn.M)) else np.zeros(len(kp))
-    if not np.all(np.isfinite(inertia)):
-        inertia = np.zeros(len(kp))
-    return inertia * (kp * (q_hold - dyn.q) - kd * dyn.qd) + bias
+    """Position hold: tau = M (kp (q_hold - q) - kd qd) + bias [Nm] (decoupled, critically damped with the
+    spec gains: a joint moving at v stops within ~v / (e sqrt(kp))). Non-finite M → bias only (the
+    caller checks the finiteness of the result)."""
+    M = dyn.M
+    if not np.all(np.isfinite(M)):
+        return np.array(bias, dtype=float)
+    return M @ (kp * (q_hold - dyn.q) - kd * dyn.qd) + bias

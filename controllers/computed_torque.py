@@ -4,8 +4,9 @@
 
 With the exact model the error obeys e'' + kd e' + kp e = 0 for every joint, decoupled; the gains are
 the robot spec's acceleration-level kp [1/s^2] and kd [1/s]. ``M`` and ``bias`` come from MuJoCo
-(``MujocoArmDynamics``, already computed by ``mj_step1``, so this costs one 7x7 mat-vec); ``model =
-"pinocchio"`` recomputes them with Pinocchio's CRBA + RNEA instead (a cross-check, ~10 us slower).
+(``MujocoArmDynamics``, already computed by ``mj_step1``, so this costs one 7x7 mat-vec, ~4 us per
+tick); ``model = "pinocchio"`` computes M acc + bias with Pinocchio's RNEA instead (what a real
+controller with only the robot model would do; ~2 us more).
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from tcot_hybrid.config import require_choice
 from tcot_hybrid.controllers import register
-from tcot_hybrid.controllers.base import bias_attr, STATUS_OK, Controller, JointGainsConfig, resolve_joint_gains
+from tcot_hybrid.controllers.base import STATUS_OK, Controller, JointGainsConfig, bias_attr, resolve_joint_gains
 
 
 @dataclass(frozen=True, kw_only=True)

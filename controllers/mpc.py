@@ -8,22 +8,26 @@ command applied now); the others last ``node_ticks`` ticks, so the horizon spans
 Per joint i, with node times t_k and position/velocity predictions q_k = f_k + Phi v, qd_k = g_k + Psi v:
 
     min  sum_k  w_p,i (q_k - r_k)^2 + w_v,i (qd_k - rd_k)^2 + v_k^2      (+ terminal weight on k = H)
-         + slack_weight (s_p,i^2 + s_v,i^2)
-    s.t. q_min + margin <= q_k - s_p,i <= q_max - margin                 (soft, free slack per joint)
+         + limit_weight (s_p,i^2 + s_v,i^2)
+    s.t. q_min + margin <= q_k - s_p,i <= q_max - margin                 (soft: one slack per joint)
          -v_max <= qd_k - s_v,i <= v_max                                  (soft)
          -torque_margin tau_max <= M v_k + bias <= torque_margin tau_max  (hard, first torque_nodes
                                                                           nodes, M and bias of this tick)
 
 The weights come from the acceleration-level gains (default: robot spec): w_p = kp^2,
 w_v = kd^2 - 2 kp, the LQR weights whose infinite-horizon optimum is the PD law kp e + kd de. The
-QP is always feasible (the torque box admits some v; position and velocity are soft).
+slack s shifts the whole predicted path of a joint back inside its limits; its weight is set
+relative to the tracking weight of that joint (``limit_weight`` x w_p x H), so a reference beyond a
+limit moves the plan past it by only ~1/limit_weight of the excess. The QP is always feasible (the
+torque box admits some v; position and velocity are soft).
 
 References: ``preview`` rows are the reference positions at t + (k+1) ctrl_dt (``preview_horizon``
 rows; shorter previews hold their last row, i.e. the trajectory ends there). Without a preview the
 reference is extrapolated at constant velocity from (q_ref, qd_ref). Velocity references at the
 nodes are finite differences of the positions.
 
-Every tick checks the inputs, the OSQP status (only ``solved`` is accepted), the wall time against
+Every tick checks the inputs, the OSQP status (``solved``; ``solved_inaccurate`` only when the torque
+stays within tau_max, noted in ``Command.detail``), the wall time against
 ``time_limit_fraction * ctrl_dt`` and the finiteness of the torque; any failure returns a PD hold of
 the position measured when the failure started (``Command.status == "fallback"``, reason in
 ``detail``) and MPC is retried next tick (transitions are blended like a controller switch).
@@ -40,17 +44,18 @@ import scipy.sparse as sp
 from tcot_hybrid.config import require_int, require_nonnegative, require_positive
 from tcot_hybrid.controllers import register
 from tcot_hybrid.controllers.base import (
-    bias_attr,
     STATUS_FALLBACK,
     STATUS_OK,
     Controller,
     JointGainsConfig,
+    bias_attr,
     pd_hold_torque,
     resolve_joint_gains,
 )
 from tcot_hybrid.errors import ConfigError, ControllerError
 
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
+_ACCEPTED = (_SOLVED, int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE))
 _STATUS_NAMES = {int(s): s.name.removeprefix("OSQP_").lower() for s in osqp.SolverStatus}
 
 
@@ -67,10 +72,15 @@ class MPCConfig(JointGainsConfig):
     torque_margin:       fraction of tau_max the plan may use [-]; lower leaves room for OSQP's
                          tolerance before the safety layer has to saturate.
     position_margin_rad: distance kept from q_min/q_max [rad]; higher = more conservative.
-    slack_weight:        cost on position/velocity limit violations [1/rad^2, s^2/rad^2]; higher = harder limits.
+    limit_weight:        weight of the limit slacks relative to the joint's summed tracking weight [-];
+                         higher = harder position/velocity limits, worse conditioning (more iterations).
     max_iter:            OSQP iteration cap [-]; reaching it is a failure (fallback).
     eps:                 OSQP absolute and relative tolerance [-]; lower = more accurate, slower.
-    time_limit_fraction: solve-time budget as a fraction of ctrl_dt [-]; exceeding it is a failure.
+    time_limit_fraction: wall-clock solve budget as a fraction of ctrl_dt [-]; exceeding it is a
+                         failure (fallback). Lower = stricter real-time behaviour. None = no wall-clock
+                         deadline (only ``max_iter``): runs then replay bit-identically whatever the
+                         machine load, which a wall-clock deadline cannot promise (measured on 2 shared
+                         cores: median solve 0.15 ms, p99 0.3 ms, load spikes up to ~6 ms).
     """
 
     horizon: int = 10
@@ -79,10 +89,10 @@ class MPCConfig(JointGainsConfig):
     terminal_weight: float = 5.0
     torque_margin: float = 0.97
     position_margin_rad: float = 0.005
-    slack_weight: float = 1e6
+    limit_weight: float = 100.0
     max_iter: int = 200
-    eps: float = 1e-4
-    time_limit_fraction: float = 0.5
+    eps: float = 1e-3
+    time_limit_fraction: float | None = 1.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -97,10 +107,11 @@ class MPCConfig(JointGainsConfig):
         if self.torque_margin > 1.0:
             raise ConfigError(f"torque_margin must be in (0, 1], got {self.torque_margin!r}")
         require_nonnegative("position_margin_rad", self.position_margin_rad)
-        require_positive("slack_weight", self.slack_weight)
+        require_positive("limit_weight", self.limit_weight)
         require_int("max_iter", self.max_iter, minimum=1)
         require_positive("eps", self.eps)
-        require_positive("time_limit_fraction", self.time_limit_fraction)
+        if self.time_limit_fraction is not None:
+            require_positive("time_limit_fraction", self.time_limit_fraction)
 
 
 @register
@@ -117,7 +128,8 @@ class JointMPC(Controller):
         self.node_ticks = s
         self.horizon = H
         self.preview_horizon = 1 + (H - 1) * s
-        self.time_limit_s = config.time_limit_fraction * ctrl_dt
+        frac = config.time_limit_fraction
+        self.time_limit_s = float("inf") if frac is None else frac * ctrl_dt
         # Node k (1..H) is at t_k; its reference is preview row rows[k-1].
         dts = np.array([ctrl_dt] + [s * ctrl_dt] * (H - 1))
         t_start = np.concatenate([[0.0], np.cumsum(dts)[:-1]])
@@ -145,10 +157,14 @@ class JointMPC(Controller):
         self._w_v = np.maximum(self.kd**2 - 2 * self.kp, 0.0)[:, None] * node_w_end[None, :]
         blocks = [phi.T @ (self._w_p[i][:, None] * phi) + psi.T @ (self._w_v[i][:, None] * psi) + np.diag(node_w)
                   for i in range(n)]
-        P = sp.block_diag(blocks + [sp.eye(2 * n) * config.slack_weight], format="csc")
+        # Slacks [s_p (n), s_v (n)], weighted against each joint's summed tracking weights.
+        w_sp = config.limit_weight * self._w_p.sum(axis=1)
+        w_sv = config.limit_weight * np.maximum(self._w_v.sum(axis=1), 1.0)
+        P = sp.block_diag(blocks + [sp.diags(np.concatenate([w_sp, w_sv]))], format="csc")
         P = sp.triu(P, format="csc")
 
-        # Constraint matrix: [pos rows (n*H); vel rows (n*H); torque rows (n*H)], joint-major rows/cols.
+        # Constraint matrix: [pos rows (n*H); vel rows (n*H); torque rows (n*torque_nodes)], joint-major.
+        # M's entries sit at fixed CSC positions (found by tagging) so each tick rewrites only them.
         nv = n * H
         self._nx = nv + 2 * n
         rows, cols, vals = [], [], []
@@ -162,18 +178,19 @@ class JointMPC(Controller):
                 rows += [r, nv + r]
                 cols += [nv + i, nv + n + i]
                 vals += [-1.0, -1.0]
+        n_rows0 = 2 * nv
         m_tags = []
         Ht = self._torque_nodes = config.torque_nodes
         for i in range(n):
             for k in range(Ht):
                 for j in range(n):
-                    rows.append(2 * nv + i * Ht + k)
+                    rows.append(n_rows0 + i * Ht + k)
                     cols.append(j * H + k)
                     vals.append(1.0)
                     m_tags.append((i, j))
         nnz_fixed = len(vals) - len(m_tags)
         tags = np.arange(1, len(vals) + 1, dtype=float)
-        A_tag = sp.csc_matrix((tags, (rows, cols)), shape=(2 * nv + n * Ht, self._nx))
+        A_tag = sp.csc_matrix((tags, (rows, cols)), shape=(n_rows0 + n * Ht, self._nx))
         order = A_tag.data.astype(int) - 1            # CSC position -> original entry
         vals_arr = np.array(vals)
         self._A_data = vals_arr[order].copy()
@@ -185,17 +202,19 @@ class JointMPC(Controller):
         A = sp.csc_matrix((self._A_data.copy(), A_tag.indices, A_tag.indptr), shape=A_tag.shape)
 
         self._q_vec = np.zeros(self._nx)
-        self._l = np.zeros(2 * nv + n * Ht)
-        self._u = np.zeros(2 * nv + n * Ht)
+        self._l = np.zeros(n_rows0 + n * Ht)
+        self._u = np.zeros(n_rows0 + n * Ht)
+        self._trq = n_rows0
         self._q_lo = (spec.q_min + config.position_margin_rad)[:, None]
         self._q_hi = (spec.q_max - config.position_margin_rad)[:, None]
         self._v_max = spec.v_max[:, None]
-        self._tau_lim = config.torque_margin * np.asarray(spec.tau_max, dtype=float)
+        self._tau_max = np.asarray(spec.tau_max, dtype=float)
+        self._tau_lim = config.torque_margin * self._tau_max
         self._idx0 = np.arange(n) * H
         self._prob = osqp.OSQP()
         self._prob.setup(P, self._q_vec, A, -np.ones(self._l.size), np.ones(self._l.size), verbose=False,
                          eps_abs=config.eps, eps_rel=config.eps, max_iter=config.max_iter,
-                         time_limit=self.time_limit_s, warm_starting=True, polishing=False,
+                         time_limit=min(self.time_limit_s, 1e10), warm_starting=True, polishing=False,
                          check_termination=5)
         raw = getattr(self._prob, "_solver", None)
         needed = ("update_data_vec", "update_data_mat", "solve", "info", "solution")
@@ -238,8 +257,8 @@ class JointMPC(Controller):
         u[:nv] = (self._q_hi - F).ravel()
         l[nv:2 * nv] = (-self._v_max - qd0[:, None]).repeat(H, axis=1).ravel()
         u[nv:2 * nv] = (self._v_max - qd0[:, None]).repeat(H, axis=1).ravel()
-        l[2 * nv:] = np.repeat(-self._tau_lim - bias, self._torque_nodes)
-        u[2 * nv:] = np.repeat(self._tau_lim - bias, self._torque_nodes)
+        l[self._trq:] = np.repeat(-self._tau_lim - bias, self._torque_nodes)
+        u[self._trq:] = np.repeat(self._tau_lim - bias, self._torque_nodes)
         self._A_data[self._m_pos] = M.ravel()[self._m_flat]
         if self._raw is not None:
             # The low-level solver skips ~35 us/tick of wrapper bookkeeping (derivative caches).
@@ -271,7 +290,7 @@ class JointMPC(Controller):
             status, x = self._solve_qp(dyn, R, RD)
             self.last_solve_status = _STATUS_NAMES.get(status, str(status))
             elapsed = time.perf_counter() - start
-            if status != _SOLVED:
+            if status not in _ACCEPTED:
                 reason = f"osqp status {self.last_solve_status}"
             elif elapsed > self.time_limit_s:
                 reason = f"timeout {elapsed * 1e3:.2f} ms > {self.time_limit_s * 1e3:.2f} ms"
@@ -280,12 +299,18 @@ class JointMPC(Controller):
                 if not np.all(np.isfinite(tau)):
                     reason = "non-finite solution"
                     tau = None
+                elif status != _SOLVED:
+                    # Inaccurate (tolerance x10): usable only if the torque box, the hard constraint, holds.
+                    if np.any(np.abs(tau) > self._tau_max):
+                        reason = f"osqp status {self.last_solve_status} beyond tau_max"
+                        tau = None
         solve_time = time.perf_counter() - start
         if tau is not None:
             if self._fallback:
                 self._fallback = False
                 self._blend_from_last_output()
-            return tau, STATUS_OK, "", solve_time
+            detail = "" if status == _SOLVED else f"osqp status {self.last_solve_status}"
+            return tau, STATUS_OK, detail, solve_time
         # Fallback: PD hold of the position measured when the failure started.
         if not self._fallback:
             self._fallback = True

@@ -1,7 +1,7 @@
 """Operational-space control of the TCP (position + orientation) with a joint-space posture task.
 
 The Cartesian reference is the forward kinematics of the joint reference (Pinocchio, arm-only model
-with the gripper locked; ~5 us per tick, half the cost of a second MuJoCo kinematics pass):
+with the gripper locked: ~2 us per tick; a second MuJoCo kinematics + Jacobian pass measured ~9 us):
 
     x_ref = FK(q_ref),   xd_ref = J(q_ref) qd_ref
 

@@ -153,8 +153,8 @@ class EvalCommand:
     """Comma-separated planners (default: --planner)."""
     modes: str = "global"
     """Comma-separated supervisor modes."""
-    perturb: str = "none"
-    """Perturbation to inject (perturbations land with the GLSR issue; only 'none' exists yet)."""
+    perturb: str | None = None
+    """Comma-separated perturbations to inject (default: --perturb.name, i.e. none); `tcot list` shows them."""
     robots: str | None = None
     """Comma-separated robots (default: --robot)."""
     controllers: str | None = None
@@ -193,15 +193,14 @@ def cmd_eval(argv: list[str]) -> int:
         raise ConfigError(unknown_name("suite", cmd.suite, SUITES))
     tasks = ([t.name for t in all_tasks if t.suite == cmd.suite] if cmd.suite else
              _split(cmd.tasks, ",".join(t.name for t in all_tasks)))
-    if cmd.perturb != "none":
-        raise ConfigError(unknown_name("perturbation", cmd.perturb, ["none"]))
     if cmd.episodes < 1 or cmd.workers < 1 or cmd.seed_start < 0:
         raise ConfigError(f"--episodes and --workers must be >= 1 and --seed-start >= 0; got "
                           f"{cmd.episodes}, {cmd.workers}, {cmd.seed_start}")
     jobs = make_jobs(cmd.cfg, tasks=tasks, planners=_split(cmd.planners, cmd.cfg.planner),
                      modes=_split(cmd.modes, "global"), robots=_split(cmd.robots, cmd.cfg.robot),
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
-                     episodes=cmd.episodes, seed_start=cmd.seed_start, perturb=cmd.perturb)
+                     episodes=cmd.episodes, seed_start=cmd.seed_start,
+                     perturbs=_split(cmd.perturb, cmd.cfg.perturb.name))
     seen = set()
     for j in jobs:  # every name checked before any episode runs
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)

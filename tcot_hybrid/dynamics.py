@@ -127,6 +127,11 @@ class MujocoArmDynamics:
         self._jac_tick = -1
         self._pose_tick = -1
 
+    @property
+    def dof(self) -> int:
+        """Number of arm joints (same as ``spec.dof``)."""
+        return self.n
+
     # -- construction helpers -------------------------------------------------------------------
     def _id(self, obj, kind: str, name: str) -> int:
         i = mujoco.mj_name2id(self.model, obj, name)

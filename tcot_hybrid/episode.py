@@ -22,12 +22,14 @@ from tcot_hybrid.dynamics import MujocoArmDynamics
 from tcot_hybrid.errors import SimulationError
 from tcot_hybrid.executor import MotionExecutor
 from tcot_hybrid.ik import make_ik
+from tcot_hybrid.perturbations import make_perturbation
 from tcot_hybrid.planners import Observation, PlannerContext, check_planner_name, make_planner
 from tcot_hybrid.robot import load_robot_spec
 from tcot_hybrid.run_config import RunConfig
 from tcot_hybrid.safety import SafetyLayer
 from tcot_hybrid.sim import Simulation
 from tcot_hybrid.smoothing import JointSmoother
+from tcot_hybrid.supervision import Supervisor
 from tcot_hybrid.tasks import make_task
 
 SETTLE_S = 0.2  # [s] objects settle (robot holding home) before the first planner step
@@ -92,69 +94,106 @@ def build_stack(cfg: RunConfig) -> Stack:
 
 
 class EpisodeRunner:
-    """Runs one episode step by step (the CLI, the evaluator, the bench and the examples share it)."""
+    """Runs one episode step by step (the CLI, the evaluator, the bench and the examples share it).
 
-    def __init__(self, cfg: RunConfig, *, frame_hook=None):
+    Per planner step: hooks → perturbation → supervisor decision (maybe a new plan) → ctrl ticks →
+    fault and success checks.
+    """
+
+    def __init__(self, cfg: RunConfig, *, frame_hook=None, pre_step_hook=None):
         self.cfg = cfg
         self.stack = build_stack(cfg)
         self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
+        self.pre_step_hook = pre_step_hook  # called at the start of every planner step, before planning
+        self.supervisor = Supervisor(cfg.supervisor, self.stack.planner)
+        self.perturbation = make_perturbation(cfg.perturb, cfg.seed)
         self.steps = 0
         self.success = False
         self.fault: str | None = None
         self.plans: list = []
+        self._obs: tuple[int, Observation] | None = None
 
     def observe(self, step: int) -> Observation:
+        """The planner's observation at this step (rendered at most once per step)."""
+        if self._obs is not None and self._obs[0] == step:
+            return self._obs[1]
         s = self.stack
-        image = depth = None
+        image = None
         if s.planner.needs_image:
             px = self.cfg.scene.planner_image_px
             image = s.sim.render(self.cfg.scene.planner_camera, px, px)
-        return Observation(step=step, image=image, depth_m=depth, q=s.sim.q,
-                           gripper_closed=s.sim.gripper_closed_cmd(), instruction=s.task.instruction)
+            if self.perturbation is not None:
+                image = self.perturbation.on_image(image)
+        obs = Observation(step=step, image=image, depth_m=None, q=s.sim.q,
+                          gripper_closed=s.sim.gripper_closed_cmd(), instruction=s.task.instruction)
+        self._obs = (step, obs)
+        return obs
 
     def settle(self) -> None:
         ex = self.stack.executor
         for _ in range(round(SETTLE_S / self.cfg.timing.ctrl_dt)):
             ex.tick()
 
-    def wants_plan(self, step: int) -> str | None:
-        sup = self.cfg.supervisor
-        if step == 0:
-            return sup.mode
-        if sup.mode == "local" and step % sup.t_l == 0:
-            return "local"
-        return None
+    def _reset_scene(self) -> None:
+        """glsr_reset: restore the episode's initial layout and send the arm home (same seed)."""
+        s = self.stack
+        s.sim.reset(np.random.default_rng(self.cfg.seed))
+        s.executor.reset_after_scene_reset()
+        self._obs = None
+        self.settle()
 
-    def run(self, progress=None) -> dict:
+    def _step_once(self, step: int, *, may_plan: bool) -> None:
+        s, ex = self.stack, self.stack.executor
+        if self.pre_step_hook is not None:
+            self.pre_step_hook(self, step)
+        if self.perturbation is not None:
+            ev = self.perturbation.on_step(self, step)
+            if ev is not None:
+                ex.event(**ev)
+        if may_plan:
+            d = self.supervisor.decide(step, observe=lambda: self.observe(step), executor=ex)
+            if d.event is not None:
+                ex.event(**d.event)
+            if d.reset:
+                self._reset_scene()
+            if d.plan_mode is not None:
+                plan = s.planner.plan(self.observe(step), mode=d.plan_mode)
+                if ex.set_plan(plan):
+                    self.plans.append(plan)
+        for _ in range(self.cfg.timing.ticks_per_plan):
+            ex.tick()
+            if s.sim.fault is not None:
+                break
+        self.steps = step + 1
+
+    def run(self, progress=None, *, steps_after_success: int = 0) -> dict:
+        """Run until success, the task's time limit or a fault. ``steps_after_success`` keeps stepping
+        (the arm holds its last plan) a few planner steps past success, e.g. to record success frames."""
         s, cfg = self.stack, self.cfg
         t0 = time.perf_counter()
-        ex = s.executor
         max_steps = int(round(s.task.time_limit_s / cfg.timing.plan_dt))
-        ticks = cfg.timing.ticks_per_plan
         self.settle()
+        step = 0
         try:
-            for step in range(max_steps):
-                mode = self.wants_plan(step)
-                if mode is not None:
-                    plan = s.planner.plan(self.observe(step), mode=mode)
-                    if ex.set_plan(plan):
-                        self.plans.append(plan)
-                for _ in range(ticks):
-                    ex.tick()
-                    if s.sim.fault is not None:
-                        break
-                self.steps = step + 1
+            while step < max_steps:
+                self._step_once(step, may_plan=True)
                 if self.frame_hook is not None:
                     self.frame_hook(self, step)
                 if progress is not None:
                     progress.update(1)
+                step += 1
                 if s.sim.fault is not None:
                     self.fault = f"sim_fault:{s.sim.fault.warning}"
-                    ex.event("sim_fault", warning=s.sim.fault.warning, count=s.sim.fault.count)
+                    s.executor.event("sim_fault", warning=s.sim.fault.warning, count=s.sim.fault.count)
                     break
                 if s.task.success(s.sim.world):
                     self.success = True
                     break
+            for _ in range(steps_after_success if self.success else 0):
+                self._step_once(step, may_plan=False)
+                step += 1
+            if self.pre_step_hook is not None:  # the final state, after the last step
+                self.pre_step_hook(self, step)
         except SimulationError as exc:
             self.fault = f"sim_fault:{exc}"
         wall = time.perf_counter() - t0
@@ -170,7 +209,8 @@ class EpisodeRunner:
             "mode": cfg.supervisor.mode, "seed": cfg.seed,
             "success": success, "fault": self.fault,
             "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
-            "steps": self.steps, "plans": len(self.plans),
+            "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
+            "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),

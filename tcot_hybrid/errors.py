@@ -49,6 +49,10 @@ class SimulationError(TcotError):
     """The simulator diverged or warned (MuJoCo auto-reset, bad accelerations)."""
 
 
+class DatasetError(TcotError):
+    """A demonstration file is missing, truncated, corrupt or not in the expected layout."""
+
+
 def unknown_name(kind: str, name: object, valid: Iterable[str]) -> str:
     """Message for an unknown registry name, listing the valid ones."""
     return f"unknown {kind} {name!r}; valid {kind}s: {', '.join(sorted(valid))}"

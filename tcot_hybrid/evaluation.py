@@ -7,6 +7,7 @@ robot × controller × IK with success rate and standard error; ``DIR/eval.md`` 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import multiprocessing as mp
@@ -23,29 +24,30 @@ CELL_KEYS = ("task", "suite", "planner", "mode", "perturb", "robot", "controller
 @dataclasses.dataclass(frozen=True)
 class Job:
     cfg: RunConfig
-    perturb: str
+
+    @property
+    def perturb(self) -> str:
+        return self.cfg.perturb.name
 
     @property
     def key(self) -> str:
         c = self.cfg
         return "|".join(map(str, (c.task, c.planner, c.supervisor.mode, self.perturb, c.robot, c.controller,
-                                  c.ik, c.seed)))
+                                  c.ik, c.seed, c.digest())))
 
 
 def make_jobs(base: RunConfig, *, tasks, planners, modes, robots, controllers, iks, episodes: int,
-              seed_start: int, perturb: str = "none") -> list[Job]:
+              seed_start: int, perturbs=("none",)) -> list[Job]:
+    """The cross product, every field validated by the config dataclasses before anything runs."""
     jobs = []
-    for task in tasks:
-        for planner in planners:
-            for mode in modes:
-                for robot in robots:
-                    for ctrl in controllers:
-                        for ik in iks:
-                            for seed in range(seed_start, seed_start + episodes):
-                                cfg = dataclasses.replace(
-                                    base, task=task, planner=planner, robot=robot, controller=ctrl, ik=ik,
-                                    seed=seed, supervisor=dataclasses.replace(base.supervisor, mode=mode))
-                                jobs.append(Job(cfg, perturb))
+    for task, planner, mode, perturb, robot, ctrl, ik in itertools.product(
+            tasks, planners, modes, perturbs, robots, controllers, iks):
+        for seed in range(seed_start, seed_start + episodes):
+            cfg = dataclasses.replace(
+                base, task=task, planner=planner, robot=robot, controller=ctrl, ik=ik, seed=seed,
+                supervisor=dataclasses.replace(base.supervisor, mode=mode),
+                perturb=dataclasses.replace(base.perturb, name=perturb))
+            jobs.append(Job(cfg))
     return jobs
 
 

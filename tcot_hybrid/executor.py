@@ -73,6 +73,7 @@ class MotionExecutor:
         self._arrived_at: float | None = None
         self._ik_seed = sim.q
         self._last_tau = np.zeros(sim.robot.dof)
+        self._faulted = False
         self.ik_failures = 0
         self.tracking_err_max = 0.0
         self.max_joint_limit_violation = 0.0
@@ -159,6 +160,15 @@ class MotionExecutor:
         else:
             self.phase = "done"
 
+    def reset_after_scene_reset(self) -> None:
+        """The simulator was reset (arm at home): drop the plan and restart the reference there."""
+        self.plan, self.points, self.grip = None, np.zeros((0, 3)), np.zeros(0, bool)
+        self.index, self.phase = -1, "idle"
+        self.smoother.reset(self.sim.q)
+        self._ik_seed = self.sim.q
+        self.controller.reset(self.dyn, self._last_tau)
+        self.event("scene_reset")
+
     @property
     def plan_finished(self) -> bool:
         return self.phase in ("done", "idle")
@@ -177,8 +187,15 @@ class MotionExecutor:
         ref = self.smoother.step()
         sim.step1()
         self.dyn.update()
-        cmd = self.controller.compute(self.dyn, ref)
+        c = self.controller
+        preview = self.smoother.preview(c.preview_horizon) if c.preview_horizon else None
+        cmd = c.compute(self.dyn, ref, preview=preview)
         safe = self.safety.filter(cmd, self.dyn, ref)
+        if safe.status == "fault":
+            self._faulted = True
+        elif self._faulted:  # resuming after a held fault: restart the controller from here, bumplessly
+            self._faulted = False
+            c.reset(self.dyn, self._last_tau)
         self._last_tau = safe.tau
         self.dyn.write_ctrl(safe.tau)
         sim.step2(self.substeps - 1)

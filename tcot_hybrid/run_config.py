@@ -18,34 +18,16 @@ from typing import Any
 
 import yaml
 
-from tcot_hybrid.config import TimingConfig, require_choice, require_int
+from tcot_hybrid.config import TimingConfig, require_int
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.executor import ExecutorConfig
 from tcot_hybrid.ik import IKConfig
 from tcot_hybrid.lift import LiftConfig
+from tcot_hybrid.perturbations import PerturbConfig
 from tcot_hybrid.planners.oracle import OracleConfig
 from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.smoothing import SmoothingConfig
-
-MODES = ("global", "local")
-
-
-@dataclass(frozen=True, kw_only=True)
-class SupervisorConfig:
-    """When to plan.
-
-    mode: "global" = one whole-task plan at the first step, followed frozen (paper: global only);
-          "local" = a short-horizon plan every ``t_l`` steps (paper: local only).
-    t_l:  local planning period [planner steps]. Down: reacts faster, more planner calls.
-    """
-
-    mode: str = "global"
-    t_l: int = 5
-
-    def __post_init__(self) -> None:
-        require_choice("supervisor.mode", self.mode, MODES)
-        require_int("supervisor.t_l", self.t_l, minimum=1)
-
+from tcot_hybrid.supervision import SupervisorConfig
 
 @dataclass(frozen=True, kw_only=True)
 class RunConfig:
@@ -72,6 +54,7 @@ class RunConfig:
     lift: LiftConfig = field(default_factory=LiftConfig)
     oracle: OracleConfig = field(default_factory=OracleConfig)
     supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
+    perturb: PerturbConfig = field(default_factory=PerturbConfig)
 
     def __post_init__(self) -> None:
         require_int("seed", self.seed, minimum=0)

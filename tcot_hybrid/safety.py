@@ -2,9 +2,9 @@
 
 Per control tick, ``SafetyLayer.filter(cmd, dyn, reference)``:
 
-1. refuses a torque command that is non-finite or has the wrong shape, and a reference (q, qd, qdd)
-   that is non-finite or has the wrong shape: fault → hold position with a PD hold on the last safe
-   measured q (``tau = I_eff (kp (q_safe - q) - kd qd) + bias_net``, robot-spec gains); if even that
+1. refuses a torque command that is non-finite or has the wrong shape, a reference (q, qd, qdd)
+   that is non-finite or has the wrong shape, and a non-finite measured state: fault → hold position with a PD hold on the last safe
+   measured q (``tau = M (kp (q_safe - q) - kd qd) + bias_net``, robot-spec gains); if even that
    is non-finite, gravity/bias only; if that is non-finite too, zero torque;
 2. saturates torques beyond ``tau_max`` — never silently: the tick's result says ``"saturated"``,
    carries the events, and the counters record it;
@@ -40,6 +40,7 @@ BAD_REFERENCE_SHAPE = "bad_reference_shape"
 TORQUE_SATURATED = "torque_saturated"
 POSITION_LIMIT = "position_limit"
 VELOCITY_LIMIT = "velocity_limit"
+NONFINITE_STATE = "nonfinite_state"  # measured q or qd non-finite (the simulation diverged)
 HOLD_NONFINITE = "hold_nonfinite"  # even the PD hold was non-finite: bias-only or zero torque applied
 
 
@@ -57,8 +58,8 @@ class SafeCommand(NamedTuple):
     """Torque to apply this tick and what the layer did to get it.
 
     tau:       (n,) torques [Nm], always finite and within +-tau_max (a fresh array).
-    status:    "ok", "saturated" (some joint clipped to tau_max) or "fault" (command or reference refused,
-               holding position).
+    status:    "ok", "saturated" (some joint clipped to tau_max) or "fault" (command, reference or
+               measured state refused, holding position).
     max_ratio: max |tau_cmd| / tau_max of the controller's command this tick [-] (NaN if non-finite).
     events:    events recorded this tick (empty tuple in the nominal path).
     """
@@ -179,10 +180,15 @@ class SafetyLayer:
             np.abs(tau, out=buf)
             buf *= self._inv_tau_max
             r = float(buf.max())
-        fault = not (tau_ok and ref_ok and (math.isfinite(r + self._ones @ rq + self._ones @ rqd + self._ones @ rqdd)
-                                             or _finite_exact(tau, rq, rqd, rqdd)))
+        fault = not (state_ok and tau_ok and ref_ok
+                     and (math.isfinite(r + self._ones @ rq + self._ones @ rqd + self._ones @ rqdd)
+                          or _finite_exact(tau, rq, rqd, rqdd)))
         if fault:
             events = self._describe_fault(t, tau, tau_ok, (rq, rqd, rqdd), ref_ok)
+            if not state_ok:
+                bad = np.flatnonzero(~(np.isfinite(q) & np.isfinite(qd)))
+                j = int(bad[0]) if bad.size else 0
+                events.append(SafetyEvent(t, NONFINITE_STATE, self.joint_names[j], float(q[j] + qd[j]), float("nan")))
             tau, hold_events = self._hold(dyn, t)
             events.extend(hold_events)
             self.faults += 1
@@ -196,11 +202,10 @@ class SafetyLayer:
             if r > self.max_torque_ratio:
                 self.max_torque_ratio = r
             status = STATUS_OK
-            if state_ok:
-                if self._q_safe is None:
-                    self._q_safe = np.array(q)
-                else:
-                    np.copyto(self._q_safe, q)
+            if self._q_safe is None:
+                self._q_safe = np.array(q)
+            else:
+                np.copyto(self._q_safe, q)
         if r > 1.0:
             events = self._saturate_events(t, tau, buf, events)
             tau = np.clip(tau, -self._tau_max, self._tau_max)

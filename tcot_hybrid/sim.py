@@ -50,8 +50,8 @@ class Simulation:
         self.arm_act = np.array([m.actuator(a).id for a in robot.arm_actuators])
         self.gripper_act = m.actuator(robot.gripper_actuator).id
         self.gripper_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.gripper_joints])
-        finger_bodies = {m.jnt_bodyid[m.joint(j).id] for j in robot.gripper_joints}
-        finger_geoms = tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] in finger_bodies)
+        finger_bodies = [m.jnt_bodyid[m.joint(j).id] for j in robot.gripper_joints]
+        finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] == b) for b in finger_bodies)
         self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms)
         self.ee_site = m.site(robot.ee_site).id
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}

@@ -36,7 +36,14 @@ class Planner(ABC):
 
     name: ClassVar[str]
     needs_image: ClassVar[bool] = True
+    replan_every_step: ClassVar[bool] = False  # direct-action policies act every step
 
     @abstractmethod
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         """A global (whole task) or local (short horizon from now) plan."""
+
+    def success_probability(self, obs: Observation) -> float:
+        """p(task successful) for failure detection; planners without a detector cannot run GLSR."""
+        from tcot_hybrid.errors import PlanningError
+
+        raise PlanningError(f"planner {self.name!r} has no failure detector; GLSR modes need one")

@@ -36,12 +36,13 @@ class World:
     """Read/write access to the simulated scene by object name (privileged: oracle, predicates, resets)."""
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, objects: dict[str, ObjectInfo], *,
-                 ee_site: str, finger_geoms: tuple[int, ...]):
+                 ee_site: str, finger_geoms: tuple[tuple[int, ...], ...]):
         self.model, self.data, self.objects = model, data, objects
         self._body = {o.name: model.body(o.body).id for o in objects.values()}
         self._jnt = {o.name: model.joint(o.joint).id for o in objects.values()}
         self._site = model.site(ee_site).id
-        self.finger_geoms = frozenset(finger_geoms)
+        self.fingers = tuple(frozenset(f) for f in finger_geoms)  # geom ids per finger
+        self.finger_geoms = frozenset().union(*self.fingers)
         self._geoms_of = {
             name: frozenset(int(g) for g in np.flatnonzero(self._subtree_mask(self._body[name])))
             for name in objects
@@ -87,6 +88,10 @@ class World:
                 return True
         return False
 
+    def is_held(self, name: str) -> bool:
+        """True when both fingers touch the object (it is between the closed fingers, lifted or not)."""
+        return all(self.touching(name, f) for f in self.fingers)
+
     def is_grasped(self, name: str) -> bool:
         """True when the object touches the gripper's fingers and is off the table."""
         o = self.objects[name]
@@ -118,7 +123,14 @@ def sample_apart(rng: np.random.Generator, regions: dict[str, tuple[float, float
 # --- skills: the oracle's script pieces --------------------------------------------------------------
 
 class Skill(ABC):
-    """One step of an oracle script: done(world) tells whether it is achieved; keyframes() from now."""
+    """One step of an oracle script: done(world) tells whether it is achieved; keyframes() from now.
+
+    ``obj`` is what the robot grasps or acts on, ``target`` where it goes (None when there is no
+    receptacle); perturbations use them to know what to move.
+    """
+
+    obj: str
+    target: str | None = None
 
     @abstractmethod
     def done(self, world: World) -> bool: ...
@@ -136,6 +148,7 @@ class PickPlace(Skill):
 
     def __init__(self, obj: str, place, achieved, *, grasp_dz: float = 0.0):
         self.obj, self.place, self.achieved, self.grasp_dz = obj, place, achieved, grasp_dz
+        self.target = getattr(place, "target", None)
 
     def done(self, world: World) -> bool:
         return self.achieved(world)
@@ -144,7 +157,7 @@ class PickPlace(Skill):
         p = world.pos(self.obj)
         goal = np.asarray(self.place(world), dtype=float)
         kfs: list[Keyframe] = []
-        if not world.is_grasped(self.obj):
+        if not world.is_held(self.obj):
             gz = p[2] + self.grasp_dz
             kfs += [_kf(p[0], p[1], max(TRAVEL_Z, gz + APPROACH_DZ), False),
                     _kf(p[0], p[1], gz + APPROACH_DZ / 2, False),
@@ -166,6 +179,7 @@ class PullDrawer(Skill):
 
     def __init__(self, drawer: str, *, distance: float, achieved):
         self.drawer, self.distance, self.achieved = drawer, distance, achieved
+        self.obj = drawer
 
     def done(self, world: World) -> bool:
         return self.achieved(world)
@@ -188,7 +202,9 @@ class HookPull(Skill):
     """Grasp the stick, put its hook behind ``target`` and drag the target toward the robot."""
 
     def __init__(self, stick: str, target: str, *, pull_to_x: float, achieved):
-        self.stick, self.target, self.pull_to_x, self.achieved = stick, target, pull_to_x, achieved
+        self.stick, self.pull_to_x, self.achieved = stick, pull_to_x, achieved
+        self.obj = target  # what has to move is the target cube; the stick is the tool
+        self.target = None
 
     def done(self, world: World) -> bool:
         return self.achieved(world)
@@ -197,8 +213,8 @@ class HookPull(Skill):
         s = world.pos(self.stick)
         axis = world.rot(self.stick)[:, 0]
         grip = s + axis * STICK_GRIP_FROM_END
-        c = world.pos(self.target)
-        half = world.objects[self.target].half_height
+        c = world.pos(self.obj)
+        half = world.objects[self.obj].half_height
         # Hook's near face 1.5 cm behind the target's far face; the shaft runs beside the target (on the
         # stick's side) so that lowering the stick does not land it on top of the target.
         hook_x = c[0] + half + 0.015 + 0.0125
@@ -208,7 +224,7 @@ class HookPull(Skill):
         gz_low = grip[2] + 0.004
         lift_z = 0.09
         kfs: list[Keyframe] = []
-        if not world.is_grasped(self.stick):
+        if not world.is_held(self.stick):
             kfs += [_kf(grip[0], grip[1], TRAVEL_Z, False),
                     _kf(grip[0], grip[1], grip[2] + APPROACH_DZ / 2, False),
                     _kf(grip[0], grip[1], grip[2], True)]

@@ -48,6 +48,7 @@ def _on_surface_point(surface: str, obj: str):
         q = world.pos(surface)
         s, o = world.objects[surface], world.objects[obj]
         return np.array([q[0], q[1], q[2] + s.half_height + o.half_height])
+    f.target = surface
     return f
 
 
@@ -56,6 +57,7 @@ def _in_container_point(container: str, obj: str, offset=(0.0, 0.0)):
         c, o = world.objects[container], world.objects[obj]
         base = world.pos(container) + world.rot(container) @ np.array([offset[0], offset[1], c.bottom])
         return base + np.array([0, 0, o.half_height])
+    f.target = container
     return f
 
 
@@ -67,6 +69,7 @@ def _in_open_drawer_point(drawer: str, obj: str):
     def f(world: World):
         still_to_open = max(DRAWER_PULL_M - world.joint_q(f"{drawer}_slide"), 0.0)
         return inner(world) - np.array([still_to_open, 0.0, 0.0])
+    f.target = drawer
     return f
 
 
@@ -80,6 +83,7 @@ def _on_top_of(*column: str):
         b = world.pos(column[0])
         h = [world.objects[n].half_height for n in column]
         return b + np.array([0, 0, h[0] + 2 * sum(h[1:-1]) + h[-1]])
+    f.target = column[0]
     return f
 
 

@@ -1,0 +1,247 @@
+"""Seeded, named perturbations that make a frozen global plan fail the way real manipulation fails.
+
+Each perturbation fires once per episode at a planner step (or when its condition holds), is recorded
+as a ``perturbation`` event, and draws its randomness from the episode seed, so a run is reproducible
+from (seed, config). Strength units are per perturbation (see ``describe()``).
+"""
+from __future__ import annotations
+
+from abc import ABC
+from dataclasses import dataclass
+from typing import ClassVar
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.config import require_int, require_nonnegative
+from tcot_hybrid.errors import ConfigError, unknown_name
+
+WORKSPACE = (0.33, 0.62, -0.27, 0.27)  # xmin, xmax, ymin, ymax [m] where moved objects may land
+FREE_RADIUS = {"cube": 0.035, "cylinder": 0.035, "plate": 0.085, "bowl": 0.09, "basket": 0.1, "stick": 0.0}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbConfig:
+    """Which perturbation to inject.
+
+    name:     "none" or a registered perturbation (``tcot list`` shows them).
+    strength: size of the perturbation in the perturbation's unit; None = its default. Up = harder.
+    at_step:  planner step at which it fires (or from which its condition is watched); None = default.
+    """
+
+    name: str = "none"
+    strength: float | None = None
+    at_step: int | None = None
+
+    def __post_init__(self) -> None:
+        valid = ["none", *_REGISTRY]
+        if self.name not in valid:
+            raise ConfigError(unknown_name("perturbation", self.name, valid))
+        if self.strength is not None:
+            require_nonnegative("perturb.strength", self.strength)
+        if self.at_step is not None:
+            require_int("perturb.at_step", self.at_step, minimum=1)
+
+
+class Perturbation(ABC):
+    """Base: subclasses implement ``fire`` (state change at a step) and/or ``on_image``."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    unit: ClassVar[str]
+    default_strength: ClassVar[float]
+    default_at_step: ClassVar[int] = 8
+
+    def __init__(self, config: PerturbConfig, seed: int):
+        self.strength = self.default_strength if config.strength is None else float(config.strength)
+        self.at_step = self.default_at_step if config.at_step is None else config.at_step
+        self.rng = np.random.default_rng([seed, 7919])  # independent of the layout's stream
+        self.fired = False
+        self.pending: list[tuple[int, callable]] = []
+
+    def on_step(self, runner, step: int) -> dict | None:
+        """Called at the start of every planner step; returns an event dict when something happened."""
+        for due, action in list(self.pending):
+            if step >= due:
+                self.pending.remove((due, action))
+                action()
+        if self.fired or step < self.at_step:
+            return None
+        info = self.fire(runner, step)
+        if info is not None:
+            self.fired = True
+            mujoco.mj_forward(runner.stack.sim.model, runner.stack.sim.data)
+            return {"kind": "perturbation", "name": self.name, "step": step, **info}
+        return None
+
+    def fire(self, runner, step: int) -> dict | None:  # noqa: ARG002 - image-only perturbations
+        return None
+
+    def on_image(self, image: np.ndarray) -> np.ndarray:
+        return image
+
+
+def _first_open_skill(runner):
+    world = runner.stack.sim.world
+    for skill in runner.stack.task.skills():
+        if not skill.done(world):
+            return skill
+    return None
+
+
+def _relocate(runner, name: str, distance: float, rng) -> dict | None:
+    """Move a free object ``distance`` [m] in a random direction to a free spot in the workspace."""
+    world = runner.stack.sim.world
+    info = world.objects[name]
+    if info.kind == "drawer":  # the cabinet is fixed to the table: shift it sideways instead
+        cab = world.model.body(f"{name}_cabinet").id
+        dy = float(rng.choice([-1.0, 1.0])) * min(distance, 0.06)
+        world.model.body_pos[cab][1] += dy
+        return {"object": name, "moved_m": [0.0, round(dy, 4), 0.0]}
+    if info.kind == "stick":
+        return None
+    old = world.pos(name)
+    others = [(world.pos(n)[:2], FREE_RADIUS.get(o.kind, 0.04)) for n, o in world.objects.items()
+              if n != name and o.kind in FREE_RADIUS]
+    r = FREE_RADIUS.get(info.kind, 0.04)
+    x0, x1, y0, y1 = WORKSPACE
+    for _ in range(200):
+        a = rng.uniform(0, 2 * np.pi)
+        p = old[:2] + distance * np.array([np.cos(a), np.sin(a)])
+        if not (x0 <= p[0] <= x1 and y0 <= p[1] <= y1):
+            continue
+        if all(np.linalg.norm(p - q) >= r + rq + 0.01 for q, rq in others):
+            world.set_pose(name, (p[0], p[1], info.rest_z + 0.001), float(rng.uniform(-0.3, 0.3)) * (
+                info.kind in ("cube", "cylinder")))
+            return {"object": name, "moved_m": np.round(np.append(p - old[:2], 0.0), 4).tolist()}
+    return None
+
+
+class ObjectMoved(Perturbation):
+    name = "object_moved"
+    description = "the object to manipulate is moved after the global plan is made"
+    unit = "m"
+    default_strength = 0.10
+    default_at_step = 5
+
+    def fire(self, runner, step):
+        skill = _first_open_skill(runner)
+        if skill is None or runner.stack.sim.world.is_grasped(skill.obj):
+            return None
+        return _relocate(runner, skill.obj, self.strength, self.rng)
+
+
+class TargetMoved(Perturbation):
+    name = "target_moved"
+    description = "the target receptacle (plate, bowl, basket, bottom block, drawer) moves after the plan is made"
+    unit = "m"
+    default_strength = 0.10
+    default_at_step = 5
+
+    def fire(self, runner, step):
+        skill = _first_open_skill(runner)
+        if skill is None or skill.target is None:
+            return None
+        return _relocate(runner, skill.target, self.strength, self.rng)
+
+
+class ObjectDrop(Perturbation):
+    name = "object_drop"
+    description = "the grasp slips and the held object drops mid-transport (gripper forced open briefly)"
+    unit = "s open"
+    default_strength = 0.2
+    default_at_step = 1
+
+    def fire(self, runner, step):
+        sim = runner.stack.sim
+        world = sim.world
+        held = [n for n in world.objects if world.is_grasped(n)]
+        if not held or sim.tcp_pos()[2] < 0.08:
+            return None
+        closed_cmd = sim.data.ctrl[sim.gripper_act]
+        sim.data.ctrl[sim.gripper_act] = sim.robot.gripper_open
+        steps_open = max(1, int(round(self.strength / runner.cfg.timing.plan_dt)))
+
+        def restore():
+            sim.data.ctrl[sim.gripper_act] = closed_cmd
+        self.pending.append((step + steps_open, restore))
+        return {"object": held[0], "tcp_z_m": round(float(sim.tcp_pos()[2]), 3)}
+
+
+class OffCentreGrasp(Perturbation):
+    name = "offcenter_grasp"
+    description = "the object is nudged just before the fingers close, so the grasp lands off-centre"
+    unit = "m"
+    default_strength = 0.025
+    default_at_step = 1
+
+    def fire(self, runner, step):
+        sim = runner.stack.sim
+        world = sim.world
+        skill = _first_open_skill(runner)
+        if skill is None or world.objects[skill.obj].kind not in ("cube", "cylinder"):
+            return None
+        p, tcp = world.pos(skill.obj), sim.tcp_pos()
+        if np.linalg.norm(tcp[:2] - p[:2]) > 0.02 or not (p[2] < tcp[2] < p[2] + 0.07):
+            return None
+        d = self.strength * float(self.rng.choice([-1.0, 1.0]))
+        world.set_pose(skill.obj, (p[0] + d, p[1], p[2]), 0.0)
+        return {"object": skill.obj, "moved_m": [round(d, 4), 0.0, 0.0]}
+
+
+class ArmPush(Perturbation):
+    name = "arm_push"
+    description = "an external horizontal push on the arm's last link for 0.2 s"
+    unit = "N"
+    default_strength = 40.0
+    default_at_step = 12
+
+    def fire(self, runner, step):
+        sim = runner.stack.sim
+        body = sim.model.site_bodyid[sim.ee_site]
+        a = self.rng.uniform(0, 2 * np.pi)
+        force = self.strength * np.array([np.cos(a), np.sin(a), 0.0])
+        sim.data.xfrc_applied[body, :3] = force
+
+        def release():
+            sim.data.xfrc_applied[body, :3] = 0.0
+        self.pending.append((step + 2, release))
+        return {"force_n": np.round(force, 2).tolist()}
+
+
+class CameraNoise(Perturbation):
+    name = "camera_noise"
+    description = "Gaussian pixel noise and a random occluding patch on the planner image"
+    unit = "intensity sigma (0-255)"
+    default_strength = 12.0
+    default_at_step = 0
+
+    def fire(self, runner, step):
+        return {"sigma": self.strength}
+
+    def on_image(self, image: np.ndarray) -> np.ndarray:
+        if not self.fired:
+            return image
+        h, w = image.shape[:2]
+        noisy = image.astype(np.float32) + self.rng.normal(0.0, self.strength, image.shape)
+        ph, pw = h // 6, w // 6
+        y, x = self.rng.integers(0, h - ph), self.rng.integers(0, w - pw)
+        noisy[y:y + ph, x:x + pw] = 90.0
+        return np.clip(noisy, 0, 255).astype(np.uint8)
+
+
+# Order matters: the first three are the failure modes a frozen global plan cannot survive.
+_REGISTRY: dict[str, type[Perturbation]] = {
+    c.name: c for c in (ObjectMoved, TargetMoved, ObjectDrop, OffCentreGrasp, ArmPush, CameraNoise)
+}
+
+
+def list_perturbations() -> list[dict]:
+    return [{"name": c.name, "description": c.description, "unit": c.unit, "default_strength": c.default_strength}
+            for c in _REGISTRY.values()]
+
+
+def make_perturbation(config: PerturbConfig, seed: int) -> Perturbation | None:
+    if config.name == "none":
+        return None
+    return _REGISTRY[config.name](config, seed)

@@ -1,0 +1,130 @@
+"""Supervision on top of the motion stack: when to plan globally, when to check for failure, when to
+replan locally — the paper's Algorithm 1 (GLSR) as an explicit state machine, plus its ablations.
+
+Modes
+- ``global``: one global plan at the first step, followed frozen (paper: global trajectory only).
+- ``local``: a local plan every ``t_l`` steps from the first step (paper: local trajectory only).
+- ``glsr``: Algorithm 1. Global plan at the first step, followed frozen until ``t_f``; from then on
+  failure detection every step; when ``t mod t_l == 0`` and the task is not judged successful, a local
+  plan from the current image, which the motion stack retargets to smoothly.
+- ``glsr_reset``: the paper's released-code variant: on the first detected failure after ``t_f`` the
+  scene is reset to its initial state and the task is retried with local plans.
+A planner with ``replan_every_step`` (the direct-action baseline) is asked every step whatever the mode.
+Every decision is returned as an event (step, state, success probability, replan reason).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from tcot_hybrid.config import require_choice, require_int, require_positive
+
+SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SupervisorConfig:
+    """GLSR parameters (steps are planner steps of plan_dt).
+
+    mode:              global | local | glsr | glsr_reset (see module doc).
+    t_f:               steps the global plan is followed frozen before failure detection starts. Up:
+                       fewer needless replans on slow tasks; down: earlier recovery.
+    t_l:               local planning period [steps]. Down: reacts faster, more planner calls.
+    success_threshold: p(success) at or above which the task is judged done (no replan). Up: replans
+                       more readily (fewer missed failures, more false alarms).
+    geometric_checks:  also replan (after the first step) when the current plan's IK did not converge or
+                       the plan ran out while the task is not judged successful.
+    max_resets:        glsr_reset only: how many times the scene may be reset.
+    """
+
+    mode: str = "global"
+    t_f: int = 60
+    t_l: int = 8
+    success_threshold: float = 0.5
+    geometric_checks: bool = False
+    max_resets: int = 1
+
+    def __post_init__(self) -> None:
+        require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
+        require_int("supervisor.t_f", self.t_f, minimum=0)
+        require_int("supervisor.t_l", self.t_l, minimum=1)
+        require_positive("supervisor.success_threshold", self.success_threshold)
+        if not 0.0 < self.success_threshold <= 1.0:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"supervisor.success_threshold must be in (0, 1], got {self.success_threshold}")
+        require_int("supervisor.max_resets", self.max_resets, minimum=0)
+
+
+class Decision(NamedTuple):
+    plan_mode: str | None  # "global" | "local" | "direct" | None (keep following)
+    reset: bool            # glsr_reset: restore the initial scene before planning
+    event: dict | None
+
+
+class Supervisor:
+    """Decides, at the start of each planner step, whether and how to (re)plan."""
+
+    def __init__(self, config: SupervisorConfig, planner):
+        self.cfg, self.planner = config, planner
+        self.state = "start"
+        self.resets = 0
+        self.replans = 0
+        self._ik_failures_at_plan = 0
+
+    def _event(self, step, p=None, reason=None, plan=None) -> dict:
+        ev = {"kind": "supervisor", "step": step, "state": self.state}
+        if p is not None:
+            ev["p_success"] = round(float(p), 4)
+        if reason:
+            ev["reason"] = reason
+        if plan:
+            ev["plan"] = plan
+        return ev
+
+    def decide(self, step: int, *, observe, executor) -> Decision:
+        cfg = self.cfg
+        if getattr(self.planner, "replan_every_step", False):
+            self.state = "direct"
+            return Decision("direct", False, self._event(step, plan="direct") if step == 0 else None)
+        if step == 0:
+            self.state = "local_follow" if cfg.mode == "local" else "global_follow"
+            mode = "local" if cfg.mode == "local" else "global"
+            return self._plan(step, mode, "start", executor)
+        if cfg.mode == "global":
+            return Decision(None, False, None)
+        if cfg.mode == "local" or (cfg.mode == "glsr_reset" and self.resets > 0):
+            if step % cfg.t_l == 0:
+                return self._plan(step, "local", "period", executor)
+            return Decision(None, False, None)
+        geometric = self._geometric_reason(executor) if cfg.geometric_checks else None
+        if step <= cfg.t_f and geometric is None:
+            return Decision(None, False, None)
+        p = self.planner.success_probability(observe())
+        successful = p >= cfg.success_threshold
+        if self.state == "global_follow":
+            self.state = "detect"
+        if successful:
+            return Decision(None, False, self._event(step, p=p, reason="judged_successful"))
+        if step % cfg.t_l == 0 or geometric is not None:
+            reason = geometric or "not_successful"
+            if cfg.mode == "glsr_reset" and self.resets < cfg.max_resets:
+                self.resets += 1
+                self.state = "reset"
+                return Decision("local", True, self._event(step, p=p, reason=reason, plan="reset+local"))
+            self.state = "local_follow"
+            d = self._plan(step, "local", reason, executor)
+            return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
+        return Decision(None, False, self._event(step, p=p))
+
+    def _plan(self, step, mode, reason, executor) -> Decision:
+        self.replans += step > 0
+        self._ik_failures_at_plan = executor.ik_failures
+        return Decision(mode, False, self._event(step, reason=reason, plan=mode))
+
+    def _geometric_reason(self, executor) -> str | None:
+        if executor.ik_failures > self._ik_failures_at_plan:
+            return "ik_not_converged"
+        if executor.plan_finished:
+            return "plan_finished"
+        return None
