@@ -254,6 +254,35 @@ def _depths(depth_m: object, n: int, *, error: type[Exception] = LiftError) -> n
     return depth
 
 
+def depth_at_height(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, *, min_cos: float = 1e-3) -> np.ndarray:
+    """Depth along the optical axis [m] at which each pixel's viewing ray meets the plane world z = ``z_m``.
+
+    uv_px: (N, 2) pixels [px]; z_m: (N,) plane heights [m, world z]. This turns a height lift cue
+    (the learned planner predicts the TCP's height above the table) into ``depth_m`` for
+    :func:`tcot_hybrid.lift.lift_waypoints`. Raises LiftError for non-finite input, a ray (nearly)
+    parallel to the plane (|direction z| < ``min_cos``) and a plane behind the camera along the ray.
+    """
+    uv = as_points("uv_px", uv_px, 2)
+    z = _depths(z_m, uv.shape[0])  # same shape/finiteness checks as a depth array
+    rays_cv = np.c_[uv, np.ones(len(uv))] @ camera._K_inv.T  # type: ignore[attr-defined]  # OpenCV z = 1
+    R, c = camera.T_world_cam[:3, :3], camera.T_world_cam[:3, 3]
+    d_world = rays_cv @ R.T  # world displacement per unit of optical-axis depth
+    dz = d_world[:, 2]
+    norm = np.linalg.norm(d_world, axis=1)
+    bad = np.flatnonzero(np.abs(dz) < min_cos * norm)
+    if bad.size:
+        i = int(bad[0])
+        raise LiftError(f"waypoint {i}: the ray through uv_px={uv[i].tolist()} is parallel to the plane "
+                        f"z = {z[i]} m; no depth for a height cue")
+    depth = (z - c[2]) / dz
+    bad = np.flatnonzero(~(depth > 0))
+    if bad.size:
+        i = int(bad[0])
+        raise LiftError(f"waypoint {i}: the plane z = {z[i]} m lies behind camera {camera.name!r} along the ray "
+                        f"through uv_px={uv[i].tolist()} (depth {depth[i]:.4g} m)")
+    return depth
+
+
 def triangulate(cam_a: CameraModel, uv_a: np.ndarray, cam_b: CameraModel, uv_b: np.ndarray) -> np.ndarray:
     """Linear (DLT) triangulation of matching pixels in two cameras → (N, 3) world points [m].
 

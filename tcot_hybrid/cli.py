@@ -28,6 +28,7 @@ from tcot_hybrid.run_config import RunConfig, load_config_file  # noqa: E402
 def listing() -> dict:
     from tcot_hybrid.controllers import list_controllers
     from tcot_hybrid.ik import list_ik
+    from tcot_hybrid.perturbations import list_perturbations
     from tcot_hybrid.planners import list_planners
     from tcot_hybrid.robot import list_robots
     from tcot_hybrid.tasks import list_tasks
@@ -38,6 +39,7 @@ def listing() -> dict:
         "controllers": list_controllers(),
         "ik": list_ik(),
         "planners": list_planners(),
+        "perturbations": [{"name": p["name"], "description": p["description"]} for p in list_perturbations()],
     }
 
 
@@ -59,6 +61,9 @@ def cmd_list(argv: list[str]) -> int:
             print(f"    {t['name']:<34} {t['instruction']}")
     for key in ("robots", "controllers", "ik", "planners"):
         print(f"{key}: {', '.join(data[key])}")
+    print("perturbations:")
+    for p in data["perturbations"]:
+        print(f"    {p['name']:<16} {p['description']}")
     return 0
 
 
@@ -73,36 +78,71 @@ class RunCommand:
     """YAML/TOML/JSON file with any RunConfig fields; command-line flags override it."""
     video: Path | None = None
     """Write an MP4 of the front camera with the planned waypoints drawn on it."""
+    timeline: Path | None = None
+    """Write a PNG timeline (GLSR state, p(success), replans, joints vs Ruckig reference)."""
     out: Path = Path("runs/latest")
     """Directory for episode.json."""
     viewer: bool = False
     """Open MuJoCo's interactive viewer (needs a display)."""
 
 
-def _parse_run(argv: list[str]) -> RunCommand:
+def parse_with_config(command_cls, argv: list[str], prog: str):
+    """Parse a command dataclass whose ``cfg`` defaults come from ``--config FILE`` (if given) and whose
+    flags override that file."""
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--config", type=Path)
     known, _ = pre.parse_known_args(argv)
-    base = RunConfig()
-    if known.config is not None:
-        base = load_config_file(known.config)
-    return tyro.cli(RunCommand, args=argv, default=RunCommand(cfg=base, config=known.config), prog="tcot run")
+    base = load_config_file(known.config) if known.config is not None else RunConfig()
+    return tyro.cli(command_cls, args=argv, default=command_cls(cfg=base, config=known.config), prog=prog)
+
+
+def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
+    """Record of a run that failed before its stack existed: what was asked, why it stopped, the hashes."""
+    import platform
+
+    import mujoco
+
+    from tcot_hybrid import __version__
+    from tcot_hybrid.episode import file_digest
+
+    def digest(path_of):
+        try:
+            return file_digest(path_of())
+        except Exception:  # noqa: BLE001 - e.g. the robot or checkpoint is what was refused
+            return None
+
+    from tcot_hybrid.robot import load_robot_spec
+
+    return {"task": cfg.task, "robot": cfg.robot, "controller": cfg.controller, "ik": cfg.ik, "planner": cfg.planner,
+            "mode": cfg.supervisor.mode, "seed": cfg.seed, "success": False,
+            "fault": f"not started: {type(exc).__name__}: {exc}", "sim_time_s": 0.0, "wall_time_s": 0.0,
+            "steps": 0, "plans": 0, "perturb": cfg.perturb.name, "events": [], "config": cfg.to_dict(),
+            "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
+            "checkpoint_hash": digest(lambda: cfg.checkpoint) if cfg.checkpoint else None,
+            "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
+                         "python": platform.python_version()}}
 
 
 def cmd_run(argv: list[str]) -> int:
     from tqdm import tqdm
 
     from tcot_hybrid.episode import EpisodeRunner, write_record
-    from tcot_hybrid.video import EpisodeVideo
+    from tcot_hybrid.video import EpisodeVideo, Timeline
 
-    cmd = _parse_run(argv)
+    cmd = parse_with_config(RunCommand, argv, "tcot run")
     if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
                         "use --video out.mp4 to record the episode instead")
-    runner = EpisodeRunner(cmd.cfg)
+    try:
+        runner = EpisodeRunner(cmd.cfg)
+    except BaseException as exc:  # refused or crashed before anything moved: the record says so
+        write_record(_unstarted_record(cmd.cfg, exc), cmd.out)
+        raise
     video = EpisodeVideo(runner, cmd.video) if cmd.video else None
-    if video:
-        runner.frame_hook = video.capture
+    timeline = Timeline() if cmd.timeline else None
+    hooks = [h.capture for h in (video, timeline) if h is not None]
+    if hooks:
+        runner.frame_hook = lambda r, step: [h(r, step) for h in hooks]
     viewer = None
     if cmd.viewer:
         import mujoco.viewer
@@ -116,17 +156,28 @@ def cmd_run(argv: list[str]) -> int:
         runner.frame_hook = sync
     total = int(round(runner.stack.task.time_limit_s / cmd.cfg.timing.plan_dt))
     record: dict | None = None
+    abort: BaseException | None = None
     try:
         with tqdm(total=total, desc=cmd.cfg.task, unit="step", leave=False, disable=None) as bar:
             record = runner.run(progress=bar)
+    except BaseException as exc:  # noqa: BLE001 - re-raised below, after the record is written
+        abort = exc
+        raise
     finally:
         if record is None:  # aborted: still leave a record
-            record = runner.record(0.0)
-            record["fault"] = record.get("fault") or "aborted"
-            record["success"] = False
+            why = f"aborted: {type(abort).__name__}: {abort}" if abort is not None else "aborted"
+            try:
+                record = runner.record(0.0)
+                record["fault"] = record.get("fault") or why
+                record["success"] = False
+            except Exception as exc:  # noqa: BLE001 - the record itself failed: keep the essentials
+                record = _unstarted_record(cmd.cfg, abort or exc)
+                record["fault"] = why
         path = write_record(record, cmd.out)
         if video:
             video.close()
+        if timeline:
+            timeline.save(cmd.timeline, title=f"{cmd.cfg.task} seed {cmd.cfg.seed} ({cmd.cfg.supervisor.mode})")
         if viewer:
             viewer.close()
     print(f"{record['task']} seed={record['seed']} robot={record['robot']} controller={record['controller']} "
@@ -169,6 +220,12 @@ class EvalCommand:
     """Worker processes."""
     out: Path = Path("runs/eval")
     """Output directory (re-running with the same DIR resumes)."""
+    sweep: str | None = None
+    """FIELD=V1,V2,...: one cell per value of any config field, e.g. ik_params.damping=1e-3,1e-2."""
+    ray_address: str | None = None
+    """Run the episodes on a Ray cluster at this address (needs `pip install ray`) instead of local workers."""
+    readme: Path | None = None
+    """Also write the tables into this README's <!-- eval:start/end --> section."""
 
 
 def _split(value: str | None, default: str) -> list[str]:
@@ -181,11 +238,7 @@ def cmd_eval(argv: list[str]) -> int:
     from tcot_hybrid.evaluation import evaluate, make_jobs
     from tcot_hybrid.tasks import SUITES, list_tasks
 
-    pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--config", type=Path)
-    known, _ = pre.parse_known_args(argv)
-    base = load_config_file(known.config) if known.config else RunConfig()
-    cmd = tyro.cli(EvalCommand, args=argv, default=EvalCommand(cfg=base, config=known.config), prog="tcot eval")
+    cmd = parse_with_config(EvalCommand, argv, "tcot eval")
     if cmd.suite and cmd.tasks:
         raise ConfigError("give --suite or --tasks, not both")
     all_tasks = list_tasks()
@@ -200,14 +253,20 @@ def cmd_eval(argv: list[str]) -> int:
                      modes=_split(cmd.modes, "global"), robots=_split(cmd.robots, cmd.cfg.robot),
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
                      episodes=cmd.episodes, seed_start=cmd.seed_start,
-                     perturbs=_split(cmd.perturb, cmd.cfg.perturb.name))
+                     perturbs=_split(cmd.perturb, cmd.cfg.perturb.name), sweep=cmd.sweep)
     seen = set()
     for j in jobs:  # every name checked before any episode runs
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
         if key not in seen:
             seen.add(key)
             validate_names(j.cfg)
-    result = evaluate(jobs, cmd.out, workers=cmd.workers)
+    result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
+    if cmd.readme:
+        from tcot_hybrid.bench import update_readme_section
+        from tcot_hybrid.evaluation import markdown
+
+        update_readme_section(cmd.readme, "eval", "Measured by `tcot eval " + " ".join(argv) + "`:\n\n"
+                              + markdown(result))
     tot = sum(c["successes"] for c in result["cells"])
     print(f"{tot}/{result['episodes']} episodes succeeded across {len(result['cells'])} cells in "
           f"{result['wall_time_s']:.1f}s with {cmd.workers} workers -> {cmd.out / 'eval.json'}")
@@ -241,6 +300,9 @@ def cmd_bench(argv: list[str]) -> int:
 
 
 COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_bench}
+COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromlist=["_"]).cmd_collect(argv)
+COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
+COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

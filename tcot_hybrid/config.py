@@ -18,7 +18,7 @@ def require_finite(field: str, value: Any) -> None:
     """Raise ConfigError unless ``value`` (scalar or array) is all finite numbers."""
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ConfigError(f"{field} must be numeric, got {value!r}") from exc
     if not np.all(np.isfinite(arr)):
         raise ConfigError(f"{field} must be finite, got {value!r}")
@@ -59,6 +59,8 @@ def require_choice(field: str, value: Any, choices: tuple[str, ...] | list[str])
 def whole_multiple(field: str, value: float, base_field: str, base: float) -> int:
     """Return value/base when it is a whole number >= 1, else raise ConfigError naming both fields."""
     ratio = value / base
+    if not math.isfinite(ratio):  # e.g. 1e308 / 0.002 overflows; round(inf) would raise OverflowError
+        raise ConfigError(f"{field} = {value} s must be a whole multiple (>= 1) of {base_field} = {base} s")
     n = round(ratio)
     if n < 1 or not math.isclose(ratio, n, rel_tol=0, abs_tol=1e-9):
         raise ConfigError(

@@ -19,7 +19,7 @@ from tcot_hybrid import __version__
 from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.controllers import make_controller
 from tcot_hybrid.dynamics import MujocoArmDynamics
-from tcot_hybrid.errors import SimulationError
+from tcot_hybrid.errors import PlanningError, SimulationError
 from tcot_hybrid.executor import MotionExecutor
 from tcot_hybrid.ik import make_ik
 from tcot_hybrid.perturbations import make_perturbation
@@ -68,6 +68,10 @@ def validate_names(cfg: RunConfig) -> None:
 
         raise ConfigError(unknown_name("ik backend", cfg.ik, list_ik()))
     check_planner_name(cfg.planner)
+    if cfg.checkpoint is not None and not Path(cfg.checkpoint).is_file():  # else the record's hash fails at the end
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(f"checkpoint {cfg.checkpoint!r} is not a file")
 
 
 def build_stack(cfg: RunConfig) -> Stack:
@@ -112,6 +116,7 @@ class EpisodeRunner:
         self.fault: str | None = None
         self.plans: list = []
         self._obs: tuple[int, Observation] | None = None
+        self.success_time_s: float | None = None
 
     def observe(self, step: int) -> Observation:
         """The planner's observation at this step (rendered at most once per step)."""
@@ -153,22 +158,43 @@ class EpisodeRunner:
         if may_plan:
             d = self.supervisor.decide(step, observe=lambda: self.observe(step), executor=ex)
             if d.event is not None:
+                if "p_success" in d.event:  # ground truth beside the detector's call, for its metrics
+                    d.event["true_success"] = bool(s.task.success(s.sim.world))
                 ex.event(**d.event)
             if d.reset:
                 self._reset_scene()
             if d.plan_mode is not None:
-                plan = s.planner.plan(self.observe(step), mode=d.plan_mode)
-                if ex.set_plan(plan):
-                    self.plans.append(plan)
+                self._plan(step, d.plan_mode)
         for _ in range(self.cfg.timing.ticks_per_plan):
             ex.tick()
             if s.sim.fault is not None:
                 break
         self.steps = step + 1
 
-    def run(self, progress=None, *, steps_after_success: int = 0) -> dict:
+    def _plan(self, step: int, mode: str) -> None:
+        """Ask the planner; a refused plan (bad output) or a stale one (over the latency budget) is
+        logged and dropped, and the executor keeps following the last valid plan."""
+        s, ex = self.stack, self.stack.executor
+        obs = self.observe(step)
+        t0 = time.perf_counter()
+        try:
+            plan = s.planner.plan(obs, mode=mode)
+        except PlanningError as exc:
+            ex.event("plan_rejected", step=step, plan_kind=mode, reason=str(exc))
+            return
+        latency = time.perf_counter() - t0
+        budget = self.cfg.supervisor.max_plan_latency_s
+        if budget is not None and latency > budget:
+            ex.event("plan_stale", step=step, plan_kind=mode, latency_s=round(latency, 4), budget_s=budget)
+            return
+        if ex.set_plan(plan):
+            self.plans.append(plan)
+
+    def run(self, progress=None, *, steps_after_success: int = 0, probe_detector: bool = False) -> dict:
         """Run until success, the task's time limit or a fault. ``steps_after_success`` keeps stepping
-        (the arm holds its last plan) a few planner steps past success, e.g. to record success frames."""
+        (the arm holds its last plan) a few planner steps past success, e.g. to record success frames;
+        with ``probe_detector`` the planner's failure detector is asked at each of those steps (its
+        false-alarm rate is measured on them)."""
         s, cfg = self.stack, self.cfg
         t0 = time.perf_counter()
         max_steps = int(round(s.task.time_limit_s / cfg.timing.plan_dt))
@@ -189,7 +215,12 @@ class EpisodeRunner:
                 if s.task.success(s.sim.world):
                     self.success = True
                     break
+            self.success_time_s = float(s.sim.data.time) if self.success else None
             for _ in range(steps_after_success if self.success else 0):
+                if probe_detector:
+                    p = s.planner.success_probability(self.observe(step))
+                    s.executor.event("detector", step=step, p_success=round(float(p), 4),
+                                     true_success=bool(s.task.success(s.sim.world)))
                 self._step_once(step, may_plan=False)
                 step += 1
             if self.pre_step_hook is not None:  # the final state, after the last step
@@ -208,6 +239,7 @@ class EpisodeRunner:
             "robot": cfg.robot, "controller": cfg.controller, "ik": cfg.ik, "planner": cfg.planner,
             "mode": cfg.supervisor.mode, "seed": cfg.seed,
             "success": success, "fault": self.fault,
+            "success_time_s": self.success_time_s if success else None,
             "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
             "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,

@@ -1,8 +1,11 @@
-"""``tcot eval``: suites × planners × modes × (robots × controllers × IK) × seeds, in parallel, resumable.
+"""``tcot eval``: tasks × planners × modes × perturbations × (robots × controllers × IK) × sweep values
+× seeds, in parallel worker processes (or on a Ray cluster), resumable.
 
 Every finished episode is appended to ``DIR/episodes.jsonl`` at once, so an interrupted evaluation
-resumes where it stopped. ``DIR/eval.json`` holds one cell per task × planner × mode × perturbation ×
-robot × controller × IK with success rate and standard error; ``DIR/eval.md`` the tables.
+resumes where it stopped (jobs are keyed by their full config hash). ``DIR/eval.json`` holds one cell
+per task × planner × mode × perturbation × robot × controller × IK × sweep value with success rate and
+standard error, plus failure-detector metrics; ``DIR/eval.md`` has the paper's tables (Table 1: per
+suite success ± s.e.; Table 4: ablation of the planning modes).
 """
 from __future__ import annotations
 
@@ -13,17 +16,21 @@ import math
 import multiprocessing as mp
 import os
 import time
+import typing
 from collections import defaultdict
 from pathlib import Path
 
-from tcot_hybrid.run_config import RunConfig
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.run_config import RunConfig, _coerce
 
-CELL_KEYS = ("task", "suite", "planner", "mode", "perturb", "robot", "controller", "ik")
+CELL_KEYS = ("task", "suite", "planner", "mode", "perturb", "robot", "controller", "ik", "sweep")
+DETECTOR_STEPS_AFTER_SUCCESS = 5  # planner steps past success on which the detector is probed
 
 
 @dataclasses.dataclass(frozen=True)
 class Job:
     cfg: RunConfig
+    sweep: str = "-"  # "field=value" when this job belongs to a sweep
 
     @property
     def perturb(self) -> str:
@@ -33,39 +40,82 @@ class Job:
     def key(self) -> str:
         c = self.cfg
         return "|".join(map(str, (c.task, c.planner, c.supervisor.mode, self.perturb, c.robot, c.controller,
-                                  c.ik, c.seed, c.digest())))
+                                  c.ik, self.sweep, c.seed, c.digest())))
+
+
+# --- sweeps --------------------------------------------------------------------------------------------
+
+def parse_sweep(spec: str) -> tuple[str, list[str]]:
+    """"ik_params.damping=1e-3,1e-2" -> ("ik_params.damping", ["1e-3", "1e-2"])."""
+    if "=" not in spec:
+        raise ConfigError(f"--sweep {spec!r} must look like FIELD=V1,V2 (e.g. ik_params.damping=1e-3,1e-2)")
+    field, values = spec.split("=", 1)
+    vals = [v.strip() for v in values.split(",") if v.strip()]
+    if not vals:
+        raise ConfigError(f"--sweep {spec!r} lists no values")
+    return field.strip().replace("-", "_"), vals
+
+
+def with_field(cfg, path: str, raw: str):
+    """A copy of the config tree with the dotted field ``path`` set from the string ``raw`` (typed and
+    validated like a config file value)."""
+    head, _, rest = path.partition(".")
+    names = {f.name: f for f in dataclasses.fields(cfg)}
+    if head not in names:
+        raise ConfigError(f"--sweep: unknown field {head!r} in {type(cfg).__name__}; valid: {', '.join(sorted(names))}")
+    hint = typing.get_type_hints(type(cfg))[head]
+    if rest:
+        sub = getattr(cfg, head)
+        if not dataclasses.is_dataclass(sub):
+            raise ConfigError(f"--sweep: {head!r} has no sub-fields")
+        return dataclasses.replace(cfg, **{head: with_field(sub, rest, raw)})
+    import yaml
+
+    value = yaml.safe_load(raw)  # numbers, booleans and strings as in a config file
+    return dataclasses.replace(cfg, **{head: _coerce(path, hint, value)})
 
 
 def make_jobs(base: RunConfig, *, tasks, planners, modes, robots, controllers, iks, episodes: int,
-              seed_start: int, perturbs=("none",)) -> list[Job]:
+              seed_start: int, perturbs=("none",), sweep: str | None = None) -> list[Job]:
     """The cross product, every field validated by the config dataclasses before anything runs."""
+    variants = [(base, "-")]
+    if sweep:
+        field, values = parse_sweep(sweep)
+        variants = [(with_field(base, field, v), f"{field}={v}") for v in values]
     jobs = []
-    for task, planner, mode, perturb, robot, ctrl, ik in itertools.product(
-            tasks, planners, modes, perturbs, robots, controllers, iks):
+    for (cfg0, label), task, planner, mode, perturb, robot, ctrl, ik in itertools.product(
+            variants, tasks, planners, modes, perturbs, robots, controllers, iks):
         for seed in range(seed_start, seed_start + episodes):
             cfg = dataclasses.replace(
-                base, task=task, planner=planner, robot=robot, controller=ctrl, ik=ik, seed=seed,
-                supervisor=dataclasses.replace(base.supervisor, mode=mode),
-                perturb=dataclasses.replace(base.perturb, name=perturb))
-            jobs.append(Job(cfg))
+                cfg0, task=task, planner=planner, robot=robot, controller=ctrl, ik=ik, seed=seed,
+                supervisor=dataclasses.replace(cfg0.supervisor, mode=mode),
+                perturb=dataclasses.replace(cfg0.perturb, name=perturb))
+            jobs.append(Job(cfg, label))
     return jobs
 
+
+# --- running -------------------------------------------------------------------------------------------
 
 def run_job(job: Job) -> dict:
     """Run one episode in this process; never raises (a crash is a failed, faulted episode)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     from tcot_hybrid.episode import EpisodeRunner
 
+    c = job.cfg
     try:
-        rec = EpisodeRunner(job.cfg).run()
+        runner = EpisodeRunner(c)
+        probe = c.supervisor.mode.startswith("glsr")
+        rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
         rec.pop("config", None)
-        rec["events"] = [e for e in rec["events"] if e["kind"] not in ("plan_adopted", "gripper")]
+        keep = ("supervisor", "detector", "perturbation", "sim_fault", "ik_not_converged", "plan_rejected",
+                "scene_reset", "safety")
+        rec["events"] = [e for e in rec["events"] if e["kind"] in keep or e["kind"].startswith("safety")]
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure
-        c = job.cfg
         rec = {"task": c.task, "planner": c.planner, "mode": c.supervisor.mode, "robot": c.robot,
                "controller": c.controller, "ik": c.ik, "seed": c.seed, "success": False,
                "fault": f"crash:{type(exc).__name__}: {exc}"}
     rec["perturb"] = job.perturb
+    rec["sweep"] = job.sweep
     rec["key"] = job.key
     return rec
 
@@ -82,7 +132,21 @@ def _done_keys(path: Path) -> dict[str, dict]:
     return done
 
 
-def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress: bool = True) -> dict:
+def _ray_results(todo: list[Job], address: str):
+    try:
+        import ray
+    except ImportError as exc:
+        raise ConfigError("--ray-address needs Ray: pip install 'ray[default]' (not a default dependency)") from exc
+    ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(run_job)
+    pending = [remote.remote(j) for j in todo]
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1)
+        yield ray.get(ready[0])
+
+
+def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress: bool = True,
+             ray_address: str | None = None) -> dict:
     from tqdm import tqdm
 
     from tcot_hybrid.tasks import make_task
@@ -93,9 +157,12 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     done = _done_keys(log)
     todo = [j for j in jobs if j.key not in done]
     t0 = time.perf_counter()
+    pool = None
     with open(log, "a") as f, tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="eval", unit="ep",
                                     disable=not progress) as bar:
-        if workers <= 1:
+        if ray_address:
+            results = _ray_results(todo, ray_address)
+        elif workers <= 1:
             results = map(run_job, todo)
         else:
             pool = mp.get_context("spawn").Pool(workers, maxtasksperchild=50)
@@ -105,7 +172,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
             f.flush()
             done[rec["key"]] = rec
             bar.update(1)
-        if workers > 1:
+        if pool is not None:
             pool.close()
             pool.join()
     wall = time.perf_counter() - t0
@@ -113,16 +180,24 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     for r in records:
         r.setdefault("suite", make_task(r["task"]).suite)
     cells = aggregate(records)
-    result = {"cells": cells, "episodes": len(records), "wall_time_s": round(wall, 2), "workers": workers}
+    result = {"cells": cells, "episodes": len(records), "ran_now": len(todo), "wall_time_s": round(wall, 2),
+              "workers": workers, "detector": detector_metrics(records)}
     (out / "eval.json").write_text(json.dumps(result, indent=2))
-    (out / "eval.md").write_text(markdown(cells))
+    (out / "eval.md").write_text(markdown(result))
     return result
+
+
+# --- aggregation ---------------------------------------------------------------------------------------
+
+def _mean(xs):
+    xs = [x for x in xs if x is not None]
+    return round(sum(xs) / len(xs), 4) if xs else None
 
 
 def aggregate(records: list[dict]) -> list[dict]:
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in records:
-        groups[tuple(r.get(k, "none") for k in CELL_KEYS)].append(r)
+        groups[tuple(r.get(k, "-" if k == "sweep" else "none") for k in CELL_KEYS)].append(r)
     cells = []
     for key, recs in groups.items():
         n = len(recs)
@@ -132,32 +207,120 @@ def aggregate(records: list[dict]) -> list[dict]:
         cell.update(episodes=n, successes=k, success_rate=round(p, 4),
                     stderr=round(math.sqrt(p * (1 - p) / n), 4),
                     faults=sum(bool(r.get("fault")) for r in recs),
-                    mean_sim_time_s=round(sum(r.get("sim_time_s", 0.0) for r in recs) / n, 3),
-                    mean_wall_time_s=round(sum(r.get("wall_time_s", 0.0) for r in recs) / n, 3),
+                    mean_episode_time_s=_mean([r.get("success_time_s") or r.get("sim_time_s") for r in recs]),
+                    mean_wall_time_s=_mean([r.get("wall_time_s") for r in recs]),
+                    mean_replans=_mean([r.get("replans") for r in recs]),
+                    mean_tracking_error_rad=_mean([r.get("max_tracking_error_rad") for r in recs]),
                     max_joint_limit_violation_rad=max(r.get("max_joint_limit_violation_rad", 0.0) for r in recs),
                     max_velocity_ratio=round(max(r.get("max_velocity_ratio", 0.0) for r in recs), 4),
-                    max_tracking_error_rad=round(max(r.get("max_tracking_error_rad", 0.0) for r in recs), 4),
                     failed_seeds=sorted(r["seed"] for r in recs if not r["success"]))
         cells.append(cell)
     return cells
 
 
-def markdown(cells: list[dict]) -> str:
-    lines = ["| task | suite | planner | mode | perturb | robot | controller | ik | success | ± s.e. | n | "
-             "max limit viol. [rad] | max \\|q̇\\|/v_max |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+def auroc(scores: list[float], labels: list[bool]) -> float | None:
+    """Area under the ROC curve (Mann-Whitney U with tie correction); None without both classes."""
+    pos = [s for s, y in zip(scores, labels) if y]
+    neg = [s for s, y in zip(scores, labels) if not y]
+    if not pos or not neg:
+        return None
+    ranked = sorted((s, i) for i, s in enumerate(scores))
+    ranks = [0.0] * len(scores)
+    i = 0
+    while i < len(ranked):
+        j = i
+        while j + 1 < len(ranked) and ranked[j + 1][0] == ranked[i][0]:
+            j += 1
+        for t in range(i, j + 1):
+            ranks[ranked[t][1]] = (i + j) / 2 + 1
+        i = j + 1
+    r_pos = sum(r for r, y in zip(ranks, labels) if y)
+    return (r_pos - len(pos) * (len(pos) + 1) / 2) / (len(pos) * len(neg))
+
+
+def detector_metrics(records: list[dict], threshold: float = 0.5) -> dict:
+    """Failure-detector figures per planner from the logged (p_success, ground truth) pairs.
+
+    auroc: over every detector call (after t_f during the episode, and on the steps after success).
+    false_alarm_rate: fraction of successful episodes in which the detector judged the finished task
+        not successful (p < threshold) on any post-success step, i.e. would have replanned needlessly.
+    detection_latency_steps: planner steps from true success to the detector's first p >= threshold.
+    """
+    by_planner: dict[str, dict] = defaultdict(lambda: {"scores": [], "labels": [], "alarms": 0,
+                                                       "successes": 0, "latency": []})
+    for r in records:
+        calls = [e for e in r.get("events", []) if e.get("kind") in ("supervisor", "detector") and "p_success" in e]
+        if not calls:
+            continue
+        d = by_planner[r["planner"]]
+        for e in calls:
+            d["scores"].append(e["p_success"])
+            d["labels"].append(bool(e.get("true_success")))
+        post = [e for e in calls if e["kind"] == "detector"]
+        if r.get("success") and post:
+            d["successes"] += 1
+            d["alarms"] += any(e["p_success"] < threshold for e in post)
+            hits = [i for i, e in enumerate(post) if e["p_success"] >= threshold]
+            if hits:
+                d["latency"].append(hits[0])
+    out = {}
+    for planner, d in by_planner.items():
+        a = auroc(d["scores"], d["labels"])
+        out[planner] = {"calls": len(d["scores"]), "positives": sum(d["labels"]),
+                        "auroc": None if a is None else round(a, 4),
+                        "false_alarm_rate": round(d["alarms"] / d["successes"], 4) if d["successes"] else None,
+                        "successful_episodes_probed": d["successes"],
+                        "detection_latency_steps": _mean(d["latency"])}
+    return out
+
+
+def _rate(group: list[dict]) -> tuple[float, float, int]:
+    k = sum(c["successes"] for c in group)
+    n = sum(c["episodes"] for c in group)
+    p = k / n if n else 0.0
+    return p, math.sqrt(p * (1 - p) / n) if n else 0.0, n
+
+
+def markdown(result: dict) -> str:
+    cells = result["cells"]
+    lines = ["## Cells", "",
+             "| task | planner | mode | perturb | robot | controller | ik | sweep | success ± s.e. | n | "
+             "mean time [s] | replans | max limit viol. [rad] | max \\|q̇\\|/v_max |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in cells:
-        lines.append(f"| {c['task']} | {c['suite']} | {c['planner']} | {c['mode']} | {c['perturb']} | {c['robot']} | "
-                     f"{c['controller']} | {c['ik']} | {c['success_rate']:.2f} | {c['stderr']:.2f} | {c['episodes']} | "
+        lines.append(f"| {c['task']} | {c['planner']} | {c['mode']} | {c['perturb']} | {c['robot']} | "
+                     f"{c['controller']} | {c['ik']} | {c['sweep']} | {c['success_rate']:.2f} ± {c['stderr']:.2f} | "
+                     f"{c['episodes']} | {c['mean_episode_time_s']} | {c['mean_replans']} | "
                      f"{c['max_joint_limit_violation_rad']:.1e} | {c['max_velocity_ratio']:.2f} |")
-    # per-suite summary (paper Table 1 form)
-    suites: dict[tuple, list[int]] = defaultdict(lambda: [0, 0])
+    # Table 1: per suite success ± s.e. for each configuration row.
+    suites = sorted({c["suite"] for c in cells})
+    rows: dict[tuple, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for c in cells:
-        key = (c["planner"], c["mode"], c["robot"], c["controller"], c["ik"])
-        suites[key + (c["suite"],)][0] += c["successes"]
-        suites[key + (c["suite"],)][1] += c["episodes"]
-    lines += ["", "| planner | mode | robot | controller | ik | suite | success ± s.e. | n |", "|---|---|---|---|---|---|---|---|"]
-    for key, (k, n) in sorted(suites.items()):
-        p = k / n
-        lines.append(f"| {' | '.join(key)} | {p:.3f} ± {math.sqrt(p * (1 - p) / n):.3f} | {n} |")
+        rows[(c["planner"], c["mode"], c["perturb"], c["robot"], c["controller"], c["ik"], c["sweep"])][c["suite"]].append(c)
+    lines += ["", "## Table 1 form: success per suite (± standard error)", "",
+              "| planner | mode | perturb | robot | controller | ik | sweep | " + " | ".join(suites) + " | avg |",
+              "|" + "---|" * (8 + len(suites))]
+    for key, by_suite in sorted(rows.items()):
+        vals = [_rate(by_suite[s]) if by_suite.get(s) else None for s in suites]
+        avg = _rate([c for s in suites for c in by_suite.get(s, [])])
+        lines.append("| " + " | ".join(key) + " | " + " | ".join(
+            f"{v[0]:.3f} ± {v[1]:.3f}" if v else "–" for v in vals) + f" | {avg[0]:.3f} ± {avg[1]:.3f} |")
+    # Table 4: ablation of planning modes (averaged over suites), per perturbation.
+    abl: dict[tuple, list] = defaultdict(list)
+    for c in cells:
+        label = "direct (no trajectory)" if c["planner"] == "direct" else (
+            f"oracle ({c['mode']})" if c["planner"] == "oracle" else c["mode"])
+        abl[(c["perturb"], label)].append(c)
+    lines += ["", "## Table 4 form: ablation (average over suites)", "",
+              "| perturbation | method | success ± s.e. | n |", "|---|---|---|---|"]
+    for (pert, label), group in sorted(abl.items()):
+        p, se, n = _rate(group)
+        lines.append(f"| {pert} | {label} | {p:.3f} ± {se:.3f} | {n} |")
+    det = result.get("detector") or {}
+    if det:
+        lines += ["", "## Failure detector", "", "| planner | calls | AUROC | false-alarm rate | latency [steps] |",
+                  "|---|---|---|---|---|"]
+        for planner, d in det.items():
+            lines.append(f"| {planner} | {d['calls']} | {d['auroc']} | {d['false_alarm_rate']} | "
+                         f"{d['detection_latency_steps']} |")
     return "\n".join(lines) + "\n"

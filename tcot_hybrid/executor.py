@@ -65,6 +65,7 @@ class MotionExecutor:
         self.ctrl_dt = sim.timing.ctrl_dt
         self.events: list[dict] = []
         self.plan: WaypointPlan | None = None
+        self.latest_points: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # last lifted plan per kind (videos)
         self.points: np.ndarray = np.zeros((0, 3))
         self.grip: np.ndarray = np.zeros(0, bool)
         self.index = -1
@@ -93,6 +94,7 @@ class MotionExecutor:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
         self.plan, self.points, self.grip = plan, points, np.asarray(plan.gripper_closed, bool)
+        self.latest_points[plan.kind] = (points, self.grip)
         q = self.sim.q
         ref_q = self.smoother.reference.q
         if np.max(np.abs(ref_q - q)) > self.config.resync_tol_rad:

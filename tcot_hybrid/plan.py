@@ -35,8 +35,11 @@ class WaypointPlan:
     meta: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        uv = np.asarray(self.uv_px, dtype=float)
-        depth = np.asarray(self.depth_m, dtype=float)
+        try:  # non-numeric output is a refused plan like NaN, not a crash
+            uv = np.asarray(self.uv_px, dtype=float)
+            depth = np.asarray(self.depth_m, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise PlanningError(f"uv_px and depth_m must be numeric arrays: {exc}") from exc
         grip = np.asarray(self.gripper_closed)
         if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] == 0:
             raise PlanningError(f"uv_px must have shape (N>=1, 2), got {uv.shape}")
@@ -45,6 +48,13 @@ class WaypointPlan:
             raise PlanningError(f"depth_m must have shape ({n},) to match uv_px, got {depth.shape}")
         if grip.shape != (n,):
             raise PlanningError(f"gripper_closed must have shape ({n},) to match uv_px, got {grip.shape}")
+        if grip.dtype != bool:  # 0/1 numbers are bits too; NaN, 0.5 or a string would be a silent guess
+            is_bit = np.zeros(n, bool)
+            if grip.dtype.kind in "iuf":
+                is_bit = (grip == 0) | (grip == 1)
+            if not is_bit.all():
+                i = int(np.flatnonzero(~is_bit)[0])
+                raise PlanningError(f"gripper_closed[{i}] = {grip[i]!r} is not a bit (bool or 0/1)")
         bad = np.flatnonzero(~np.isfinite(uv).all(axis=1) | ~np.isfinite(depth))
         if bad.size:
             i = int(bad[0])

@@ -91,7 +91,10 @@ def _coerce(path: str, tp: Any, value: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{path} must be a number, got {value!r} ({type(value).__name__})")
-        return float(value)
+        try:
+            return float(value)
+        except OverflowError as exc:  # an integer beyond float range, e.g. 10**400 in YAML
+            raise ConfigError(f"{path} must be a finite number, got a {value.bit_length()}-bit integer") from exc
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{path} must be an integer, got {value!r} ({type(value).__name__})")
@@ -139,7 +142,9 @@ def load_config_file(path: str | Path) -> RunConfig:
             data = json.loads(text)
         else:
             raise ConfigError(f"config file {str(p)!r}: unknown format {p.suffix!r}; use .yaml, .toml or .json")
-    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+    except ConfigError:
+        raise
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, ValueError) as exc:  # ValueError: e.g. a 5000-digit integer
         raise ConfigError(f"config file {str(p)!r} is malformed: {exc}") from exc
     if data is None:
         data = {}

@@ -129,9 +129,20 @@ class Simulation:
             self._renderers[key] = mujoco.Renderer(self.model, height=height, width=width)
         return self._renderers[key]
 
-    def render(self, camera: str, width: int, height: int, *, depth: bool = False) -> np.ndarray:
+    def render(self, camera: str, width: int, height: int, *, depth: bool = False,
+               markers: list[tuple[np.ndarray, tuple]] | None = None) -> np.ndarray:
+        """RGB (or depth [m]) image; ``markers`` = [(points (N,3) [m], rgba)] drawn as small spheres in
+        the scene (e.g. a lifted 3D path) — for videos only, never for planner images."""
         r = self.renderer(width, height)
         r.update_scene(self.data, camera=camera)
+        for points, rgba in markers or ():
+            scn = r.scene
+            for p in points:
+                if scn.ngeom >= scn.maxgeom:
+                    break
+                mujoco.mjv_initGeom(scn.geoms[scn.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([0.006, 0, 0]),
+                                    np.asarray(p, dtype=float), np.eye(3).ravel(), np.asarray(rgba, dtype=np.float32))
+                scn.ngeom += 1
         if depth:
             r.enable_depth_rendering()
             img = r.render().copy()

@@ -35,6 +35,8 @@ class SupervisorConfig:
     geometric_checks:  also replan (after the first step) when the current plan's IK did not converge or
                        the plan ran out while the task is not judged successful.
     max_resets:        glsr_reset only: how many times the scene may be reset.
+    max_plan_latency_s: wall-clock budget for one planner call [s]; a plan that arrives later is stale
+                       and dropped (the last valid plan is kept). None = no budget.
     """
 
     mode: str = "global"
@@ -43,6 +45,7 @@ class SupervisorConfig:
     success_threshold: float = 0.5
     geometric_checks: bool = False
     max_resets: int = 1
+    max_plan_latency_s: float | None = 1.0
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
@@ -54,6 +57,8 @@ class SupervisorConfig:
 
             raise ConfigError(f"supervisor.success_threshold must be in (0, 1], got {self.success_threshold}")
         require_int("supervisor.max_resets", self.max_resets, minimum=0)
+        if self.max_plan_latency_s is not None:
+            require_positive("supervisor.max_plan_latency_s", self.max_plan_latency_s)
 
 
 class Decision(NamedTuple):
@@ -100,14 +105,14 @@ class Supervisor:
         geometric = self._geometric_reason(executor) if cfg.geometric_checks else None
         if step <= cfg.t_f and geometric is None:
             return Decision(None, False, None)
-        p = self.planner.success_probability(observe())
-        successful = p >= cfg.success_threshold
+        p, rejected = self._detect(observe)
+        successful = (not rejected) and p >= cfg.success_threshold
         if self.state == "global_follow":
             self.state = "detect"
         if successful:
             return Decision(None, False, self._event(step, p=p, reason="judged_successful"))
         if step % cfg.t_l == 0 or geometric is not None:
-            reason = geometric or "not_successful"
+            reason = geometric or ("detector_rejected" if rejected else "not_successful")
             if cfg.mode == "glsr_reset" and self.resets < cfg.max_resets:
                 self.resets += 1
                 self.state = "reset"
@@ -116,6 +121,23 @@ class Supervisor:
             d = self._plan(step, "local", reason, executor)
             return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
         return Decision(None, False, self._event(step, p=p))
+
+    def _detect(self, observe) -> tuple[float, str | None]:
+        """The detector's p(success); an unusable answer (error, NaN, outside [0, 1]) counts as a failed
+        detection, i.e. not successful, so the robot replans rather than trusting it."""
+        from tcot_hybrid.errors import PlanningError
+
+        try:
+            raw = self.planner.success_probability(observe())
+        except PlanningError as exc:
+            return 0.0, str(exc)
+        scalar = getattr(raw, "shape", None) == () and getattr(raw, "dtype", None) is not None and raw.dtype.kind in "iuf"
+        if not scalar and (isinstance(raw, (bool, str, bytes)) or not isinstance(raw, (int, float))):
+            return 0.0, f"success probability {raw!r} is not a number"  # None, "0.7", arrays: never guessed
+        p = float(raw)
+        if not (0.0 <= p <= 1.0):  # also catches NaN
+            return 0.0, f"success probability {p!r} outside [0, 1]"
+        return p, None
 
     def _plan(self, step, mode, reason, executor) -> Decision:
         self.replans += step > 0

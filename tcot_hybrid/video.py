@@ -1,4 +1,10 @@
-"""Episode video: front camera at planner rate with the current plan's waypoints drawn on it."""
+"""Episode visualisation: annotated video and a per-episode timeline plot.
+
+Video (front camera, one frame per planner step): the global plan and the current local plan drawn
+in different colours (projected pixels + their lifted 3D points as spheres in the scene), the GLSR
+state and the latest success probability as text. Timeline (PNG): GLSR state, p(success) and replans,
+joint positions against the Ruckig reference.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,6 +16,8 @@ import numpy as np
 from tcot_hybrid.camera import CameraModel
 
 PLAN_COLOURS = {"global": (0, 200, 255), "local": (255, 80, 200), "direct": (80, 255, 80)}  # RGB
+SCENE_RGBA = {"global": (0.0, 0.8, 1.0, 0.9), "local": (1.0, 0.3, 0.8, 0.9), "direct": (0.3, 1.0, 0.3, 0.9)}
+STATES = ("start", "global_follow", "detect", "local_follow", "reset", "direct")
 
 
 def draw_plan(frame: np.ndarray, camera: CameraModel, points_world: np.ndarray, closed: np.ndarray,
@@ -29,6 +37,13 @@ def draw_plan(frame: np.ndarray, camera: CameraModel, points_world: np.ndarray, 
     return img
 
 
+def _last_p(runner) -> float | None:
+    for e in reversed(runner.stack.executor.events):
+        if "p_success" in e:
+            return float(e["p_success"])
+    return None
+
+
 class EpisodeVideo:
     """Collects one annotated frame per planner step and writes an MP4 on close()."""
 
@@ -44,14 +59,65 @@ class EpisodeVideo:
                                          macro_block_size=8)
 
     def capture(self, runner, step: int) -> None:
-        frame = runner.stack.sim.render(self.camera_name, self.w, self.h)
         ex = runner.stack.executor
-        if ex.plan is not None and len(ex.points):
-            frame = draw_plan(frame, self.camera, ex.points, ex.grip,
-                              PLAN_COLOURS.get(ex.plan.kind, (0, 200, 255)), active=ex.index)
-        cv2.putText(frame, f"t={step} {runner.cfg.task}", (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                    (255, 255, 255), 1, cv2.LINE_AA)
+        plans = [(k, v) for k, v in ex.latest_points.items() if k in ("global", "local", "direct")]
+        if ex.plan is not None and ex.plan.kind != "global":
+            plans = [(k, v) for k, v in plans if k in ("global", ex.plan.kind)]
+        markers = [(pts, SCENE_RGBA[kind]) for kind, (pts, _) in plans]
+        frame = runner.stack.sim.render(self.camera_name, self.w, self.h, markers=markers)
+        for kind, (pts, grip) in plans:
+            active = ex.index if ex.plan is not None and ex.plan.kind == kind else None
+            frame = draw_plan(frame, self.camera, pts, grip, PLAN_COLOURS[kind], active=active)
+        p = _last_p(runner)
+        text = [f"t={step} {runner.cfg.task}", f"{runner.supervisor.state}" + (f"  p(success)={p:.2f}" if p is not None else "")]
+        for i, line in enumerate(text):
+            cv2.putText(frame, line, (4, 12 + 12 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
         self.writer.append_data(frame)
 
     def close(self) -> None:
         self.writer.close()
+
+
+class Timeline:
+    """Records per planner step what the timeline plot shows; ``save(png)`` draws it."""
+
+    def __init__(self):
+        self.t, self.state, self.p, self.q, self.q_ref, self.replans = [], [], [], [], [], []
+
+    def capture(self, runner, step: int) -> None:
+        ex = runner.stack.executor
+        self.t.append(float(runner.stack.sim.data.time))
+        self.state.append(runner.supervisor.state)
+        p = _last_p(runner)
+        self.p.append(np.nan if p is None else p)
+        self.q.append(runner.stack.sim.q)
+        self.q_ref.append(np.array(ex.smoother.reference.q))
+        self.replans.append(sum(1 for e in ex.events if e["kind"] == "plan_adopted"))
+
+    def save(self, path: str | Path, title: str = "") -> None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        t = np.array(self.t)
+        fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+        ax[0].step(t, [STATES.index(s) if s in STATES else -1 for s in self.state], where="post")
+        ax[0].set_yticks(range(len(STATES)), STATES)
+        changes = np.flatnonzero(np.diff(self.replans)) + 1
+        for i in changes:
+            ax[0].axvline(t[i], color="tab:red", lw=0.8, alpha=0.6)
+        ax[0].set_title(title or "episode timeline (red: new plan adopted)")
+        ax[1].plot(t, self.p, ".-", color="tab:green")
+        ax[1].set_ylim(-0.05, 1.05)
+        ax[1].set_ylabel("p(success)")
+        q, qr = np.array(self.q), np.array(self.q_ref)
+        for j in range(q.shape[1]):
+            line, = ax[2].plot(t, q[:, j], lw=1)
+            ax[2].plot(t, qr[:, j], "--", lw=0.8, color=line.get_color())
+        ax[2].set_ylabel("q [rad] (dashed: Ruckig reference)")
+        ax[2].set_xlabel("time [s]")
+        fig.tight_layout()
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=90)
+        plt.close(fig)

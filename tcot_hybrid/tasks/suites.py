@@ -24,7 +24,9 @@ from tcot_hybrid.tasks.base import (
 )
 from tcot_hybrid.tasks.registry import register_task
 
-RADIUS = {"cube": 0.035, "cylinder": 0.035, "plate": 0.085, "bowl": 0.085, "basket": 0.095}
+# Clearance radii [m] for layout sampling: an object's footprint plus, for graspable ones, the open
+# fingers (they reach ~5.5 cm from the object's centre along y), so a grasp never hits a neighbour.
+RADIUS = {"cube": 0.045, "cylinder": 0.045, "plate": 0.085, "bowl": 0.09, "basket": 0.1}
 DRAWER_OPEN_SUCCESS_M = 0.12  # [m] slide travel that counts as "open"
 DRAWER_PULL_M = 0.17  # [m] how far the oracle pulls (leaves the interior exposed for a cube)
 
@@ -209,7 +211,7 @@ class _GoalLayout(Task):
     def reset(self, world, rng):
         cab = world.model.body("drawer_cabinet").id
         world.model.body_pos[cab] = (0.68, rng.uniform(-0.02, 0.02), 0.0)
-        world.set_pose("cube", (rng.uniform(0.34, 0.42), rng.uniform(-0.12, 0.12), 0.021), _yaw(rng))
+        world.set_pose("cube", (rng.uniform(0.34, 0.42), rng.uniform(-0.07, 0.07), 0.021), _yaw(rng))
         world.set_pose("plate", (rng.uniform(0.40, 0.52), rng.uniform(0.21, 0.26), 0.007), 0.0)
         world.set_pose("bowl", (rng.uniform(0.40, 0.52), rng.uniform(-0.27, -0.23), 0.03), 0.0)
 

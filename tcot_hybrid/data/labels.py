@@ -1,0 +1,172 @@
+"""Trajectory labels (paper eq. 4 and 5) from a gripper track. Pure numpy, vectorised over steps.
+
+A *track* is, per demo sample ``t = 0 .. T-1``: the gripper pixel ``p_t`` in the planner camera, the
+lift cue ``z_m`` (TCP height above the table top, world z) and the commanded gripper bit.
+
+* Global trajectory at step t (eq. 4): samples ``t + n_g * k`` for ``k = -(L_g // 2) .. L_g // 2``
+  (``L_g`` points, the middle one is ``t``), indices clamped to ``[0, T-1]``. Past points are the task's
+  progress context; only points from the middle on (``k >= 0``) are sent to the executor.
+* Local trajectory at step t (eq. 5): samples ``t + n_l * k`` for ``k = 0 .. L_l`` (``L_l + 1`` points),
+  clamped, with ``n_l < n_g``: short and dense.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from tcot_hybrid.config import require_int
+from tcot_hybrid.errors import ConfigError, DatasetError
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrajectoryWindowConfig:
+    """Which demo samples make up a global / local trajectory label. Units: planner steps (plan_dt each).
+
+    L_g: points in a global trajectory, odd (the middle point is the current step). Up: longer horizon
+         both ways; 51 with n_g = 4 spans ±100 steps = ±10 s, longer than the longest demo (~9-10 s),
+         so the global plan always reaches the end of the task.
+    n_g: stride between global points [steps]. Down: denser global plans. Keep n_g <= 4 so at least one
+         point falls inside every 0.5 s (5-step) gripper pause, where the gripper bit flips.
+    L_l: local trajectory length: L_l + 1 points from the current step on. Up: longer local horizon.
+    n_l: stride between local points [steps], must be < n_g (local plans are denser). Down: denser.
+    """
+
+    L_g: int = 51
+    n_g: int = 4
+    L_l: int = 8
+    n_l: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("L_g", "n_g", "L_l", "n_l"):
+            require_int(name, getattr(self, name), minimum=1)
+        if self.L_g % 2 != 1:
+            raise ConfigError(f"L_g must be odd (k = -(L_g//2) .. L_g//2 has L_g points only then), got {self.L_g}")
+        if not self.n_l < self.n_g:
+            raise ConfigError(f"n_l must be < n_g (local trajectories are denser than global ones), got "
+                              f"n_l = {self.n_l}, n_g = {self.n_g}")
+
+    @property
+    def global_offsets(self) -> np.ndarray:
+        """(L_g,) step offsets ``n_g * k``, k = -(L_g//2) .. L_g//2."""
+        h = self.L_g // 2
+        return self.n_g * np.arange(-h, h + 1)
+
+    @property
+    def global_center(self) -> int:
+        """Index of the current step inside a global window (points from here on are executed)."""
+        return self.L_g // 2
+
+    @property
+    def local_offsets(self) -> np.ndarray:
+        """(L_l + 1,) step offsets ``n_l * k``, k = 0 .. L_l."""
+        return self.n_l * np.arange(self.L_l + 1)
+
+
+def _check_T(T: int) -> None:
+    require_int("T (number of samples)", T, minimum=1)
+
+
+def global_indices(T: int, t: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
+    """(L_g,) sample indices of the global trajectory at step ``t`` of a T-sample demo (eq. 4), clamped."""
+    _check_T(T)
+    _check_t(T, t)
+    return np.clip(t + cfg.global_offsets, 0, T - 1)
+
+
+def local_indices(T: int, t: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
+    """(L_l + 1,) sample indices of the local trajectory at step ``t`` (eq. 5), clamped."""
+    _check_T(T)
+    _check_t(T, t)
+    return np.clip(t + cfg.local_offsets, 0, T - 1)
+
+
+def _check_t(T: int, t: int) -> None:
+    require_int("t (step)", t, minimum=0)
+    if t >= T:
+        raise ConfigError(f"step t = {t} is outside the demo (T = {T} samples)")
+
+
+def global_index_table(T: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
+    """(T, L_g) global indices for every step (row t = :func:`global_indices` (T, t))."""
+    _check_T(T)
+    return np.clip(np.arange(T)[:, None] + cfg.global_offsets[None, :], 0, T - 1)
+
+
+def local_index_table(T: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
+    """(T, L_l + 1) local indices for every step."""
+    _check_T(T)
+    return np.clip(np.arange(T)[:, None] + cfg.local_offsets[None, :], 0, T - 1)
+
+
+class Track(NamedTuple):
+    """A demo's gripper track, one row per sample.
+
+    uv_px:          (T, 2) gripper pixel in the planner camera [px]
+    z_m:            (T,) lift cue: TCP height above the table top (world z) [m]
+    gripper_closed: (T,) commanded gripper state (True = closed)
+    """
+
+    uv_px: np.ndarray
+    z_m: np.ndarray
+    gripper_closed: np.ndarray
+
+
+class WindowLabels(NamedTuple):
+    """Labels of one window kind for every step of a demo (K = points per window).
+
+    indices:        (T, K) sample index of each point
+    uv_px:          (T, K, 2) [px]
+    z_m:            (T, K) [m]
+    gripper_closed: (T, K) bool
+    """
+
+    indices: np.ndarray
+    uv_px: np.ndarray
+    z_m: np.ndarray
+    gripper_closed: np.ndarray
+
+
+def make_track(uv_px, z_m, gripper_closed) -> Track:
+    """Validated :class:`Track` (shapes agree, values finite)."""
+    uv = np.asarray(uv_px, dtype=np.float32)
+    z = np.asarray(z_m, dtype=np.float32)
+    g = np.asarray(gripper_closed).astype(bool)
+    if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] < 1:
+        raise DatasetError(f"track uv_px must have shape (T>=1, 2), got {uv.shape}")
+    T = uv.shape[0]
+    if z.shape != (T,) or g.shape != (T,):
+        raise DatasetError(f"track z_m and gripper_closed must have shape ({T},), got {z.shape} and {g.shape}")
+    if not (np.isfinite(uv).all() and np.isfinite(z).all()):
+        raise DatasetError("track uv_px / z_m contain non-finite values")
+    return Track(uv, z, g)
+
+
+def track_from_arrays(arrays: dict, *, uv_key: str = "obs/eef_uv_px") -> Track:
+    """Track of a demo read with :meth:`DemoFile.read`: exact TCP pixel (or ``uv_key``), TCP height, gripper."""
+    return make_track(arrays[uv_key], arrays["obs/robot0_eef_pos"][:, 2], arrays["obs/robot0_gripper_closed"])
+
+
+def _gather(track: Track, idx: np.ndarray) -> WindowLabels:
+    return WindowLabels(idx, track.uv_px[idx], track.z_m[idx], track.gripper_closed[idx])
+
+
+def global_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> WindowLabels:
+    """Global trajectory labels (eq. 4) for every step of ``track``."""
+    return _gather(track, global_index_table(len(track.uv_px), cfg))
+
+
+def local_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> WindowLabels:
+    """Local trajectory labels (eq. 5) for every step of ``track``."""
+    return _gather(track, local_index_table(len(track.uv_px), cfg))
+
+
+def window_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> tuple[WindowLabels, WindowLabels]:
+    """(global, local) labels for every step of ``track``."""
+    return global_labels(track, cfg), local_labels(track, cfg)
+
+
+__all__ = ["Track", "TrajectoryWindowConfig", "WindowLabels", "global_index_table", "global_indices",
+           "global_labels", "local_index_table", "local_indices", "local_labels", "make_track",
+           "track_from_arrays", "window_labels"]

@@ -1,0 +1,61 @@
+"""The command-line contract: listing, one episode record, clear errors with non-zero exit codes."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+ENV = {**os.environ, "MUJOCO_GL": "egl"}
+
+
+def tcot(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "tcot_hybrid.cli", *args], capture_output=True, text=True,
+                          timeout=timeout, env=ENV)
+
+
+def test_list_json_has_every_family():
+    r = tcot("list", "--json")
+    assert r.returncode == 0, r.stderr
+    data = json.loads(r.stdout)
+    assert {"tasks", "robots", "controllers", "ik", "planners", "perturbations"} <= data.keys()
+    assert {t["suite"] for t in data["tasks"]} >= {"spatial", "object", "goal", "long"}
+    assert all({"name", "suite", "instruction"} <= t.keys() for t in data["tasks"])
+    assert all({"name", "description"} <= p.keys() for p in data["perturbations"])
+
+
+def test_run_writes_the_episode_record(tmp_path):
+    r = tcot("run", "--task", "goal_open_drawer", "--seed", "3", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    rec = json.loads((tmp_path / "episode.json").read_text())
+    for key in ("task", "robot", "controller", "ik", "planner", "seed", "success", "sim_time_s", "wall_time_s",
+                "steps", "events", "max_joint_limit_violation_rad", "max_velocity_ratio", "config_hash",
+                "robot_model_hash"):
+        assert key in rec, key
+    assert rec["success"] is True and rec["max_joint_limit_violation_rad"] == 0.0
+    assert "SUCCESS" in r.stdout
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["run", "--task", "no_such_task"], "goal_cube_on_plate"),
+    (["run", "--task", "goal_open_drawer", "--robot", "r2d2"], "panda"),
+    (["run", "--task", "goal_open_drawer", "--controller", "bangbang"], "computed_torque"),
+    (["run", "--task", "goal_open_drawer", "--ik", "magic"], "pinocchio"),
+    (["run", "--task", "goal_open_drawer", "--planner", "psychic"], "oracle"),
+    (["run", "--task", "goal_open_drawer", "--timing.sim-dt", "nan"], "sim_dt"),
+    (["run", "--task", "goal_open_drawer", "--perturb.name", "meteor"], "object_moved"),
+    (["run", "--task", "goal_open_drawer", "--controller-params", "kp_scael", "2"], "kp_scale"),
+    (["eval", "--suite", "nope"], "spatial"),
+    (["frobnicate"], "valid commands"),
+])
+def test_bad_input_exits_nonzero_and_names_valid_choices(args, fragment, tmp_path):
+    r = tcot(*args, "--out", str(tmp_path)) if args[0] in ("run", "eval") else tcot(*args)
+    assert r.returncode != 0
+    assert fragment in r.stderr + r.stdout
+
+
+def test_malformed_config_file_refused(tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("timing:\n  ctrl_dt: fast\n")
+    r = tcot("run", "--config", str(cfg), "--out", str(tmp_path))
+    assert r.returncode != 0 and "ctrl_dt" in r.stderr

@@ -1,0 +1,58 @@
+import math
+
+import pytest
+
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.evaluation import aggregate, auroc, detector_metrics, evaluate, make_jobs, parse_sweep, with_field
+from tcot_hybrid.run_config import RunConfig
+
+
+def test_auroc_matches_definition():
+    assert auroc([0.1, 0.2, 0.8, 0.9], [False, False, True, True]) == 1.0
+    assert auroc([0.9, 0.8, 0.2, 0.1], [False, False, True, True]) == 0.0
+    assert auroc([0.5, 0.5], [False, True]) == 0.5
+    assert auroc([0.1], [True]) is None
+
+
+def test_sweep_parsing_and_typed_fields():
+    field, vals = parse_sweep("ik_params.damping=1e-3,1e-2")
+    assert field == "ik_params.damping" and vals == ["1e-3", "1e-2"]
+    cfg = with_field(RunConfig(), "ik_params.damping", "0.05")
+    assert cfg.ik_params.damping == 0.05
+    assert with_field(RunConfig(), "timing.plan_dt", "0.2").timing.plan_dt == 0.2
+    with pytest.raises(ConfigError, match="unknown field"):
+        with_field(RunConfig(), "ik_params.dampning", "1")
+    with pytest.raises(ConfigError, match="plan_dt"):
+        with_field(RunConfig(), "timing.plan_dt", "0.105")
+    with pytest.raises(ConfigError, match="FIELD=V1,V2"):
+        parse_sweep("ik_params.damping")
+
+
+def test_jobs_cross_product_and_keys_unique():
+    jobs = make_jobs(RunConfig(), tasks=["goal_cube_on_plate", "goal_open_drawer"], planners=["oracle"],
+                     modes=["global", "glsr"], robots=["panda"], controllers=["computed_torque"], iks=["mink"],
+                     episodes=3, seed_start=10, perturbs=["none", "object_moved"], sweep="supervisor.t_l=4,8")
+    assert len(jobs) == 2 * 2 * 2 * 2 * 3
+    assert len({j.key for j in jobs}) == len(jobs)
+
+
+def test_aggregate_and_detector_metrics():
+    recs = [dict(task="t", suite="goal", planner="learned", mode="glsr", perturb="none", robot="panda",
+                 controller="c", ik="mink", sweep="-", seed=i, success=i % 2 == 0,
+                 events=[{"kind": "supervisor", "p_success": 0.2, "true_success": False},
+                         {"kind": "detector", "p_success": 0.9 if i != 2 else 0.3, "true_success": True}])
+            for i in range(4)]
+    (cell,) = aggregate(recs)
+    assert cell["episodes"] == 4 and cell["successes"] == 2
+    assert math.isclose(cell["stderr"], math.sqrt(0.25 / 4))
+    det = detector_metrics(recs)["learned"]
+    assert det["calls"] == 8 and det["false_alarm_rate"] == 0.5
+
+
+def test_evaluate_resumes(tmp_path):
+    jobs = make_jobs(RunConfig(), tasks=["goal_open_drawer"], planners=["oracle"], modes=["global"],
+                     robots=["panda"], controllers=["computed_torque"], iks=["mink"], episodes=2, seed_start=1000)
+    first = evaluate(jobs, tmp_path, workers=1, progress=False)
+    assert first["ran_now"] == 2 and first["cells"][0]["successes"] == 2
+    again = evaluate(jobs, tmp_path, workers=1, progress=False)
+    assert again["ran_now"] == 0 and again["cells"] == first["cells"]

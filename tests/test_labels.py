@@ -1,0 +1,102 @@
+"""Trajectory label windows (paper eq. 4/5): exact indices, clamping, validation, vectorised labels."""
+import numpy as np
+import pytest
+
+from tcot_hybrid.data.labels import (
+    TrajectoryWindowConfig, global_index_table, global_indices, global_labels, local_index_table, local_indices,
+    local_labels, make_track, window_labels,
+)
+from tcot_hybrid.errors import ConfigError, DatasetError
+
+SMALL = TrajectoryWindowConfig(L_g=5, n_g=3, L_l=3, n_l=2)
+
+
+def test_global_window_hand_computed():
+    # eq. 4: t + n_g*k, k = -2..2 (L_g = 5, n_g = 3), inside the episode: no clamping
+    assert global_indices(30, 10, SMALL).tolist() == [4, 7, 10, 13, 16]
+    assert global_indices(30, 6, SMALL).tolist() == [0, 3, 6, 9, 12]
+
+
+def test_global_window_clamps_both_ends():
+    assert global_indices(30, 2, SMALL).tolist() == [0, 0, 2, 5, 8]
+    assert global_indices(30, 27, SMALL).tolist() == [21, 24, 27, 29, 29]
+    assert global_indices(1, 0, SMALL).tolist() == [0, 0, 0, 0, 0]
+
+
+def test_local_window_hand_computed_and_clamped():
+    # eq. 5: t + n_l*k, k = 0..L_l (L_l + 1 = 4 points, n_l = 2)
+    assert local_indices(30, 10, SMALL).tolist() == [10, 12, 14, 16]
+    assert local_indices(30, 26, SMALL).tolist() == [26, 28, 29, 29]
+    assert local_indices(30, 29, SMALL).tolist() == [29, 29, 29, 29]
+
+
+def test_defaults_and_centre():
+    cfg = TrajectoryWindowConfig()
+    assert (cfg.L_g, cfg.n_g, cfg.L_l, cfg.n_l) == (51, 4, 8, 2)
+    g = global_indices(500, 200, cfg)
+    assert len(g) == 51 and g[cfg.global_center] == 200 and g[0] == 100 and g[-1] == 300
+    assert np.all(np.diff(g) == 4)
+    loc = local_indices(500, 200, cfg)
+    assert loc.tolist() == list(range(200, 217, 2))
+
+
+def test_tables_match_single_step_functions():
+    for T in (1, 7, 60):
+        gt, lt = global_index_table(T, SMALL), local_index_table(T, SMALL)
+        assert gt.shape == (T, 5) and lt.shape == (T, 4)
+        for t in range(T):
+            assert gt[t].tolist() == global_indices(T, t, SMALL).tolist()
+            assert lt[t].tolist() == local_indices(T, t, SMALL).tolist()
+        assert gt.min() >= 0 and gt.max() <= T - 1
+
+
+@pytest.mark.parametrize("kw", [dict(n_l=4, n_g=4), dict(n_l=5, n_g=4), dict(L_g=50), dict(n_g=0, n_l=0),
+                                dict(L_l=0), dict(L_g=2.0)])
+def test_config_validation(kw):
+    with pytest.raises(ConfigError):
+        TrajectoryWindowConfig(**kw)
+
+
+def test_step_outside_demo_refused():
+    with pytest.raises(ConfigError, match="outside"):
+        global_indices(10, 10, SMALL)
+    with pytest.raises(ConfigError):
+        local_indices(0, 0, SMALL)
+
+
+def test_labels_gather_track_rows():
+    T = 40
+    t = np.arange(T, dtype=float)
+    track = make_track(np.stack([t, 2 * t], 1), 0.01 * t, t >= 20)
+    g, loc = window_labels(track, SMALL)
+    assert g.uv_px.shape == (T, 5, 2) and g.z_m.shape == (T, 5) and g.gripper_closed.shape == (T, 5)
+    assert loc.uv_px.shape == (T, 4, 2)
+    # row t, point k holds the track sample at the window index
+    np.testing.assert_array_equal(g.uv_px[:, :, 0], g.indices)
+    np.testing.assert_array_equal(loc.uv_px[:, :, 1], 2 * loc.indices)
+    np.testing.assert_allclose(g.z_m, 0.01 * g.indices, rtol=1e-6)
+    np.testing.assert_array_equal(loc.gripper_closed, loc.indices >= 20)
+    assert global_labels(track, SMALL).indices.tolist() == g.indices.tolist()
+    assert local_labels(track, SMALL).indices.tolist() == loc.indices.tolist()
+
+
+def test_default_stride_lands_in_every_gripper_pause():
+    """n_g = 4 puts at least one global point inside any 5-step pause wherever the window starts."""
+    cfg = TrajectoryWindowConfig()
+    T = 100
+    table = global_index_table(T, cfg)
+    for start in range(0, T - 5):
+        pause = set(range(start, start + 5))
+        for t in range(T):
+            idx = set(table[t].tolist())
+            if min(idx) <= start and max(idx) >= start + 4:
+                assert idx & pause, (start, t)
+
+
+def test_bad_track_refused():
+    with pytest.raises(DatasetError):
+        make_track(np.zeros((5, 3)), np.zeros(5), np.zeros(5))
+    with pytest.raises(DatasetError):
+        make_track(np.zeros((5, 2)), np.zeros(4), np.zeros(5))
+    with pytest.raises(DatasetError):
+        make_track(np.full((5, 2), np.nan), np.zeros(5), np.zeros(5))
