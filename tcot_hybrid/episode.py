@@ -54,15 +54,17 @@ class Stack:
 
 
 def validate_names(cfg: RunConfig) -> None:
-    """Fail on any unknown name before anything is built (each error lists the valid names)."""
+    """Fail on any unknown name or bad controller parameter before anything is built (each error lists
+    the valid choices)."""
     from tcot_hybrid.controllers import list_controllers
     from tcot_hybrid.errors import ControllerError, unknown_name
     from tcot_hybrid.ik import list_ik
 
     make_task(cfg.task)
-    load_robot_spec(cfg.robot)
+    robot = load_robot_spec(cfg.robot)
     if cfg.controller not in list_controllers():
         raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
+    make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt, params=cfg.controller_params)
     if cfg.ik not in list_ik():
         from tcot_hybrid.errors import ConfigError
 

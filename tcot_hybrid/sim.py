@@ -26,6 +26,9 @@ FATAL_WARNINGS = (
 )
 
 
+OBJECT_FLOOR_Z = -0.05  # [m] an object this far below the table top has fallen through it
+
+
 @dataclass(frozen=True)
 class SimFault:
     """A physics fault: which MuJoCo warning fired, at what simulated time [s]."""
@@ -54,6 +57,7 @@ class Simulation:
         finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] == b) for b in finger_bodies)
         self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms)
         self.ee_site = m.site(robot.ee_site).id
+        self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._fault: SimFault | None = None
 
@@ -95,6 +99,10 @@ class Simulation:
             if n:
                 self._fault = SimFault(float(self.data.time), kind.name, n)
                 return
+        # An object pushed through the table falls forever without any MuJoCo warning: a fault too.
+        z = self.data.xpos[self._object_bodies, 2]
+        if z.size and float(z.min()) < OBJECT_FLOOR_Z:
+            self._fault = SimFault(float(self.data.time), "OBJECT_BELOW_TABLE", 1)
 
     @property
     def fault(self) -> SimFault | None:
