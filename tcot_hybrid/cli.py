@@ -265,8 +265,9 @@ def cmd_eval(argv: list[str]) -> int:
         from tcot_hybrid.bench import update_readme_section
         from tcot_hybrid.evaluation import markdown
 
-        update_readme_section(cmd.readme, "eval", "Measured by `tcot eval " + " ".join(argv) + "`:\n\n"
-                              + markdown(result))
+        summary = (f"Measured by `tcot eval {' '.join(argv)}` ({result['episodes']} episodes; all cells in "
+                   f"`{cmd.out}/eval.md`):\n" + markdown(result, with_cells=False))
+        update_readme_section(cmd.readme, f"eval:{cmd.out}", summary, inside="eval")
     tot = sum(c["successes"] for c in result["cells"])
     print(f"{tot}/{result['episodes']} episodes succeeded across {len(result['cells'])} cells in "
           f"{result['wall_time_s']:.1f}s with {cmd.workers} workers -> {cmd.out / 'eval.json'}")

@@ -183,26 +183,37 @@ class MotionExecutor:
         self.controller = controller
 
     def tick(self) -> None:
-        """One control period: waypoint logic, reference, controller, safety, physics."""
-        sim = self.sim
-        self._advance(float(sim.data.time))
+        """One control period: waypoint logic, then the control tick."""
+        self._advance(float(self.sim.data.time))
+        self.control_tick()
+
+    def control_tick(self) -> None:
+        """Reference (Ruckig sample), controller, safety, physics for one ctrl_dt — no IK or planning
+        (this is what the bench compares with bare mj_step)."""
+        sim, dyn = self.sim, self.dyn
         ref = self.smoother.step()
         sim.step1()
-        self.dyn.update()
+        dyn.update()
         c = self.controller
         preview = self.smoother.preview(c.preview_horizon) if c.preview_horizon else None
-        cmd = c.compute(self.dyn, ref, preview=preview)
-        safe = self.safety.filter(cmd, self.dyn, ref)
+        cmd = c.compute(dyn, ref, preview=preview)
+        safe = self.safety.filter(cmd, dyn, ref)
         if safe.status == "fault":
             self._faulted = True
         elif self._faulted:  # resuming after a held fault: restart the controller from here, bumplessly
             self._faulted = False
-            c.reset(self.dyn, self._last_tau)
+            c.reset(dyn, self._last_tau)
         self._last_tau = safe.tau
-        self.dyn.write_ctrl(safe.tau)
+        dyn.write_ctrl(safe.tau)
         sim.step2(self.substeps - 1)
-        q, qd = sim.data.qpos[sim.arm_qpos], sim.data.qvel[sim.arm_dof]
-        viol = max(float(np.max(self._q_min - q)), float(np.max(q - self._q_max)), 0.0)
-        self.max_joint_limit_violation = max(self.max_joint_limit_violation, viol)
-        self.max_velocity_ratio = max(self.max_velocity_ratio, float(np.max(np.abs(qd) / self._v_max)))
-        self.tracking_err_max = max(self.tracking_err_max, float(np.max(np.abs(ref.q - q))))
+        # Monitors on the measured state at the start of this tick (the next tick sees the result).
+        q = dyn.q
+        viol = max((self._q_min - q).max(), (q - self._q_max).max())
+        if viol > self.max_joint_limit_violation:
+            self.max_joint_limit_violation = float(viol)
+        vr = (np.abs(dyn.qd) / self._v_max).max()
+        if vr > self.max_velocity_ratio:
+            self.max_velocity_ratio = float(vr)
+        err = np.abs(ref.q - q).max()
+        if err > self.tracking_err_max:
+            self.tracking_err_max = float(err)
