@@ -9,7 +9,7 @@ import hashlib
 import json
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -23,14 +23,14 @@ from tcot_hybrid.errors import PlanningError, SimulationError
 from tcot_hybrid.executor import MotionExecutor
 from tcot_hybrid.ik import make_ik
 from tcot_hybrid.perturbations import make_perturbation
-from tcot_hybrid.planners import Observation, PlannerContext, check_planner_name, make_planner
-from tcot_hybrid.robot import load_robot_spec
+from tcot_hybrid.planners import Observation, Planner, PlannerContext, check_planner_name, make_planner
+from tcot_hybrid.robot import RobotSpec, load_robot_spec
 from tcot_hybrid.run_config import RunConfig
 from tcot_hybrid.safety import SafetyLayer
 from tcot_hybrid.sim import Simulation
 from tcot_hybrid.smoothing import JointSmoother
 from tcot_hybrid.supervision import Supervisor
-from tcot_hybrid.tasks import make_task
+from tcot_hybrid.tasks import Task, make_task
 
 SETTLE_S = 0.2  # [s] objects settle (robot holding home) before the first planner step
 
@@ -44,13 +44,12 @@ class Stack:
     """Every stage of the motion stack for one episode, wired together."""
 
     cfg: RunConfig
-    robot: object
-    task: object
+    robot: RobotSpec
+    task: Task
     sim: Simulation
     camera: CameraModel
     executor: MotionExecutor
-    planner: object
-    extra: dict = field(default_factory=dict)
+    planner: Planner
 
 
 def validate_names(cfg: RunConfig) -> None:

@@ -71,7 +71,8 @@ class MotionExecutor:
         self.index = -1
         self.phase = "idle"  # idle | move | settle | done
         self._phase_until = 0.0
-        self._arrived_at: float | None = None
+        self._arrived_at: float | None = None  # when the reference reached the current stop point [s]
+        self._waiting_at: np.ndarray | None = None  # that stop point [m]
         self._ik_seed = sim.q
         self._last_tau = np.zeros(sim.robot.dof)
         self._faulted = False
@@ -113,7 +114,13 @@ class MotionExecutor:
         return i == len(self.points) - 1 or bool(self.grip[i]) != self.sim.gripper_closed_cmd()
 
     def _activate(self, i: int) -> None:
-        self.index, self.phase, self._arrived_at = i, "move", None
+        # A replan that keeps heading for the stop point we are already waiting at keeps the arrival
+        # clock: otherwise replanning faster than reach_timeout_s would wait there forever.
+        keep = (self._arrived_at is not None and self._waiting_at is not None
+                and np.linalg.norm(self.points[i] - self._waiting_at) <= self.config.reach_tol_m)
+        self.index, self.phase = i, "move"
+        if not keep:
+            self._arrived_at = self._waiting_at = None
         target = IKTarget(pos=self.points[i], rot=R_DOWN)
         try:
             res = self.ik.solve(target, self._ik_seed)
@@ -143,7 +150,7 @@ class MotionExecutor:
         if not self.smoother.done:
             return
         if self._arrived_at is None:
-            self._arrived_at = t
+            self._arrived_at, self._waiting_at = t, self.points[i].copy()
         err = float(np.linalg.norm(self.sim.tcp_pos() - self.points[i]))
         if err > self.config.reach_tol_m and t - self._arrived_at < self.config.reach_timeout_s:
             return

@@ -17,6 +17,7 @@ from tcot_hybrid.config import require_int, require_nonnegative
 from tcot_hybrid.errors import ConfigError, unknown_name
 
 WORKSPACE = (0.33, 0.62, -0.27, 0.27)  # xmin, xmax, ymin, ymax [m] where moved objects may land
+FAR_ZONE = (0.74, 0.86, -0.15, 0.15)  # ... and, for objects out of reach (tool task), where they stay
 FREE_RADIUS = {"cube": 0.035, "cylinder": 0.035, "plate": 0.085, "bowl": 0.09, "basket": 0.1, "stick": 0.0}
 
 
@@ -104,7 +105,7 @@ def _relocate(runner, name: str, distance: float, rng) -> dict | None:
     others = [(world.pos(n)[:2], FREE_RADIUS.get(o.kind, 0.04)) for n, o in world.objects.items()
               if n != name and o.kind in FREE_RADIUS]
     r = FREE_RADIUS.get(info.kind, 0.04)
-    x0, x1, y0, y1 = WORKSPACE
+    x0, x1, y0, y1 = WORKSPACE if old[0] <= WORKSPACE[1] else FAR_ZONE
     for _ in range(200):
         a = rng.uniform(0, 2 * np.pi)
         p = old[:2] + distance * np.array([np.cos(a), np.sin(a)])

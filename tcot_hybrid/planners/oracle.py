@@ -16,7 +16,7 @@ from tcot_hybrid.errors import PlanningError
 from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.planners.base import MODES, Observation, Planner
 from tcot_hybrid.tasks import Task, World
-from tcot_hybrid.tasks.base import Keyframe
+from tcot_hybrid.tasks.base import TRAVEL_Z, Keyframe
 
 
 RESUME_LATERAL_M = 0.02  # [m] a TCP this close (in xy) to the scripted approach resumes along it
@@ -84,6 +84,11 @@ class OraclePlanner(Planner):
         if on_path.size:
             start = int(on_path[np.argmin(np.linalg.norm(points[on_path] - tcp, axis=1))])
         rest = [Keyframe(p, bool(g)) for p, g in zip(points[start:], grip[start:])]
+        if start == 0 and not gripper_closed and tcp[2] < TRAVEL_Z - 0.02 and \
+                np.linalg.norm(rest[0].pos[:2] - tcp[:2]) > RESUME_LATERAL_M:
+            # Low with an open gripper (e.g. just released) and heading elsewhere: go straight up first so
+            # the open fingers do not drag what was just placed.
+            rest.insert(0, Keyframe(np.array([tcp[0], tcp[1], TRAVEL_Z]), False))
         return densify(rest, tcp, self.config.spacing_m, start_closed=gripper_closed)
 
     def success_probability(self, obs: Observation) -> float:

@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from tcot_hybrid.tasks.objects import (
+    HOOK_HALF_WIDTH,
     STICK_GRIP_FROM_END,
     STICK_LENGTH,
     ObjectInfo,
@@ -213,18 +214,25 @@ class HookPull(Skill):
         s = world.pos(self.stick)
         axis = world.rot(self.stick)[:, 0]
         grip = s + axis * STICK_GRIP_FROM_END
+        hook = s + axis * (STICK_LENGTH - 0.0125)
         c = world.pos(self.obj)
         half = world.objects[self.obj].half_height
+        gz_low = world.objects[self.stick].rest_z + 0.004  # TCP height that drags the stick on the table
+        lift_z = 0.09
+        held = world.is_held(self.stick)
+        tcp = world.tcp_pos()
+        if held and hook[0] > c[0] + half and abs(hook[1] - c[1]) < HOOK_HALF_WIDTH and tcp[2] < lift_z - 0.02:
+            # Already hooked behind the target and low: keep pulling from here (stable under replanning).
+            return [_kf(self.pull_to_x, tcp[1], gz_low, True), _kf(self.pull_to_x, tcp[1], gz_low, False),
+                    _kf(self.pull_to_x, tcp[1], gz_low + RETREAT_DZ, False)]
         # Hook's near face 1.5 cm behind the target's far face; the shaft runs beside the target (on the
         # stick's side) so that lowering the stick does not land it on top of the target.
         hook_x = c[0] + half + 0.015 + 0.0125
         gx = hook_x - (STICK_LENGTH - 0.0125 - STICK_GRIP_FROM_END)
         side = 1.0 if grip[1] >= c[1] else -1.0
         gy = c[1] + side * (half + 0.0125 + 0.012)
-        gz_low = grip[2] + 0.004
-        lift_z = 0.09
         kfs: list[Keyframe] = []
-        if not world.is_held(self.stick):
+        if not held:
             kfs += [_kf(grip[0], grip[1], TRAVEL_Z, False),
                     _kf(grip[0], grip[1], grip[2] + APPROACH_DZ / 2, False),
                     _kf(grip[0], grip[1], grip[2], True)]
