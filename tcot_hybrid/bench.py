@@ -22,6 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from tcot_hybrid.errors import TcotError
 from tcot_hybrid.run_config import RunConfig
 
 BENCH_TASK = "goal_cube_on_plate"
@@ -150,18 +151,43 @@ def render_ms(cfg: RunConfig, n: int) -> float:
     return (time.perf_counter() - t) / n * 1e3
 
 
-def peak_rss_mb_of_run(task: str) -> float:
-    """Peak resident memory of a separate ``tcot run`` process [MB]."""
+def planner_inference_ms(cfg: RunConfig, n: int) -> dict[str, dict]:
+    """Batch-1 latency of the learned planner per mode (shipped checkpoint), 1 torch thread."""
+    import torch
+
+    torch.set_num_threads(1)
+    r = _runner(dataclasses.replace(cfg, planner="learned"))
+    planner, obs = r.stack.planner, r.observe(0)
+    out = {}
+    for label, call in (("global", lambda: planner.plan(obs, mode="global")),
+                        ("local", lambda: planner.plan(obs, mode="local")),
+                        ("detect", lambda: planner.success_probability(obs))):
+        call()
+        times = []
+        for _ in range(n):
+            t = time.perf_counter()
+            call()
+            times.append((time.perf_counter() - t) * 1e3)
+        out[f"planner_inference_ms/{label}"] = _stat(times, "ms")
+    return out
+
+
+def peak_rss_mb_of(argv: list[str]) -> float:
+    """Peak resident memory of a separate ``tcot ...`` process [MB]."""
     code = ("import resource, sys; from tcot_hybrid.cli import main; rc = main(sys.argv[1:]); "
             "print('PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
-    with tempfile.TemporaryDirectory() as tmp:
-        out = subprocess.run([sys.executable, "-c", code, "run", "--task", task, "--seed", "0", "--out", tmp],
-                             capture_output=True, text=True,
-                             env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
+                         env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
     for line in out.stdout.splitlines():
         if line.startswith("PEAK_KB"):
             return int(line.split()[1]) / 1024
-    raise RuntimeError(f"tcot run failed in the bench: {out.stderr[-500:]}")
+    raise RuntimeError(f"`tcot {' '.join(argv)}` failed in the bench: {out.stderr[-500:]}")
+
+
+def peak_rss_mb_of_run(task: str) -> float:
+    """Peak resident memory of a ``tcot run`` of ``task`` [MB]."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return peak_rss_mb_of(["run", "--task", task, "--seed", "0", "--out", tmp])
 
 
 def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command: str = "") -> dict:
@@ -176,6 +202,7 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     substeps = base.timing.substeps
     figures: dict[str, dict] = {}
     ratios: dict[str, float] = {}
+    result_notes: list[str] = []
     controllers = list_controllers()
     steps = tqdm(total=repeats * (1 + len(controllers)) + 6, desc="bench", unit="job", disable=None)
     bare = []
@@ -209,8 +236,21 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     ratios["episode_rtf_over_bare_physics_rtf"] = round(statistics.median(rtf_plain) / ratios["bare_physics_real_time_factor"], 3)
     figures["peak_rss_mb/tcot_run"] = _stat([peak_rss_mb_of_run(BENCH_TASK)], "MB")
     steps.update(1)
+    try:
+        figures.update(planner_inference_ms(base, 20 if quick else 200))
+    except TcotError as exc:  # no shipped checkpoint for this robot: say so instead of a number
+        result_notes.append(f"planner inference not measured: {exc}")
+    default_data = Path("data") / f"demos_{robot}.hdf5"
+    if not quick and default_data.exists():
+        with tempfile.TemporaryDirectory() as tmp:  # the data load dominates; half a minute of training
+            figures["peak_rss_mb/tcot_train"] = _stat([peak_rss_mb_of(
+                ["train", "--data", str(default_data), "--out", f"{tmp}/bench.safetensors", "--max-minutes", "0.5"])],
+                "MB")
+    elif not quick:
+        result_notes.append(f"peak memory of tcot train not measured: {default_data} missing (run tcot collect)")
     steps.close()
-    result = {"figures": figures, "ratios": ratios, "command": command, "quick": quick, "robot": robot,
+    result = {"figures": figures, "ratios": ratios, "notes": result_notes, "command": command, "quick": quick,
+              "robot": robot,
               "task": BENCH_TASK, "timing": dataclasses.asdict(base.timing),
               "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "mujoco": mujoco.__version__}}
     out = Path(out_dir)
@@ -229,6 +269,7 @@ def markdown(result: dict) -> str:
         lines.append(f"| {name} | {f['median']:.4g} | {f['min']:.4g} | {f['max']:.4g} | {f['unit']} |")
     lines += ["", "| ratio | value |", "|---|---|"]
     lines += [f"| {k} | {v:.4g} |" for k, v in result["ratios"].items()]
+    lines += [f"\nNote: {n}" for n in result.get("notes", [])]
     return "\n".join(lines) + "\n"
 
 

@@ -99,6 +99,10 @@ def make_jobs(base: RunConfig, *, tasks, planners, modes, robots, controllers, i
 def run_job(job: Job) -> dict:
     """Run one episode in this process; never raises (a crash is a failed, faulted episode)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
+    # One compute thread per worker: W workers on W cores; torch's default (all cores per process)
+    # oversubscribes and made batch-1 inference ~40x slower in measurements here.
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
     from tcot_hybrid.episode import EpisodeRunner
 
     c = job.cfg

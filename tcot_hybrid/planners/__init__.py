@@ -53,5 +53,19 @@ def _oracle(ctx: PlannerContext) -> Planner:
     return OraclePlanner(ctx.task, ctx.world, ctx.camera, config=ctx.options.get("oracle", OracleConfig()))
 
 
+@register_planner("learned")
+def _learned(ctx: PlannerContext) -> Planner:
+    from tcot_hybrid.planners.learned import LearnedPlanner  # lazy: torch loads only when needed
+
+    return LearnedPlanner.from_context(ctx)
+
+
+@register_planner("direct")
+def _direct(ctx: PlannerContext) -> Planner:
+    from tcot_hybrid.planners.direct import DirectPlanner
+
+    return DirectPlanner.from_context(ctx)
+
+
 __all__ = ["MODES", "Observation", "Planner", "PlannerContext", "list_planners", "make_planner",
            "register_planner", "check_planner_name"]

@@ -1,0 +1,1 @@
+"""Shipped planner checkpoints (safetensors weights + JSON metadata), chosen by robot name."""

@@ -1,0 +1,257 @@
+"""The planner network: one CNN conditioned on a mode prompt, the instruction and the robot state.
+
+Inputs
+  image      (B, 3, H, W) float in [0, 1], the planner camera's RGB (H = W = ``image_px``)
+  tokens     (B, max_tokens) int64 instruction word ids (0 = padding), see :mod:`tcot_hybrid.learning.vocab`
+  mode       (B,) int64: 0 = global, 1 = local, 2 = detect (paper's prompts l_g, l_l, l_f)
+  proprio    (B, dof + 1) float: arm joint positions [rad] and the gripper command (1 = closed)
+
+Trajectory model (``kind="trajectory"``) outputs, for every mode's head at once (the caller picks):
+  uv_px      (B, n_global + n_local, 2) waypoint pixels [px], soft-argmax of per-waypoint heatmaps
+  z_m        (B, n_global + n_local) TCP height above the table per waypoint [m], read out of a
+             per-waypoint height map weighted by the same softmax (spatial read-out)
+  grip_logit (B, n_global + n_local) gripper-closed logit per waypoint (from pooled features)
+  success_logit (B,) task-success logit (detect mode; from pooled features)
+The first ``n_global`` waypoints belong to the global head, the next ``n_local`` to the local head.
+
+Direct model (``kind="direct"``, the paper's no-trajectory baseline) outputs
+  delta_m    (B, 3) TCP displacement over the next ``direct_horizon`` planner steps [m, world]
+  grip_logit (B, 1) gripper-closed logit at the end of that horizon
+
+Conditioning is FiLM: instruction (mean of word embeddings), mode and proprio embeddings are mixed
+by a small MLP into one vector that scales and shifts every residual block's features.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from tcot_hybrid.config import require_choice, require_int, require_positive
+
+MODE_IDS = {"global": 0, "local": 1, "detect": 2}
+HEADS = ("heatmap", "fc")
+KINDS = ("trajectory", "direct")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelConfig:
+    """Network shape. Stored in every checkpoint's metadata; loading rebuilds exactly this network.
+
+    kind:        "trajectory" (TCoT planner: waypoints + detect) or "direct" (next-action baseline).
+    head:        "heatmap" (per-waypoint heatmaps + soft-argmax, spatial height read-out) or "fc"
+                 (flatten + fully connected regression; kept only for the head comparison).
+    image_px:    square input image size [px]; must match the planner camera's image.
+    width:       channels of the 1/4-resolution stage; the 1/8 and 1/16 stages use 2x and 3x. Up: more
+                 accurate, slower (compute grows ~ width^2). Heatmaps are image_px / 4 on a side.
+    n_global:    global waypoints L_g; n_local: local waypoints L_l + 1 (from the label windows).
+    dof:         arm joints in the proprio input.
+    vocab_size:  instruction vocabulary size including <pad> and <unk>.
+    max_tokens:  instruction length after padding/truncation [words].
+    embed_dim:   word / mode embedding size; cond_dim: FiLM conditioning vector size.
+    coord_channels: append normalised x/y coordinate channels to the image (helps localisation).
+    readout_radius_cells: 0 = soft-argmax over the whole heatmap; r > 0 = at inference only, soft-argmax
+                 over the (2r+1)^2 cells around the peak (picks one mode of a multi-modal heatmap instead of
+                 averaging modes, which cuts corners of the path). Training always uses the full map.
+    z_offset_m, z_scale_m: height read-out is z_offset_m + z_scale_m * map value [m].
+    delta_scale_m: direct model: predicted delta is delta_scale_m * raw output [m].
+    """
+
+    kind: str = "trajectory"
+    head: str = "heatmap"
+    image_px: int = 128
+    width: int = 32
+    n_global: int = 51
+    n_local: int = 9
+    dof: int = 7
+    vocab_size: int = 2
+    max_tokens: int = 24
+    embed_dim: int = 32
+    cond_dim: int = 64
+    coord_channels: bool = True
+    readout_radius_cells: int = 0
+    z_offset_m: float = 0.15
+    z_scale_m: float = 0.10
+    delta_scale_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        require_choice("model.kind", self.kind, KINDS)
+        require_choice("model.head", self.head, HEADS)
+        for name in ("image_px", "width", "n_global", "n_local", "dof", "vocab_size", "max_tokens",
+                     "embed_dim", "cond_dim"):
+            require_int(f"model.{name}", getattr(self, name), minimum=1)
+        if self.image_px % 16:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"model.image_px must be a multiple of 16, got {self.image_px}")
+        if self.vocab_size < 2:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"model.vocab_size must be >= 2 (<pad>, <unk>), got {self.vocab_size}")
+        require_int("model.readout_radius_cells", self.readout_radius_cells, minimum=0)
+        for name in ("z_scale_m", "delta_scale_m"):
+            require_positive(f"model.{name}", getattr(self, name))
+
+    @property
+    def n_waypoints(self) -> int:
+        return self.n_global + self.n_local
+
+
+def _conv(cin: int, cout: int, k: int = 3, stride: int = 1) -> nn.Conv2d:
+    return nn.Conv2d(cin, cout, k, stride=stride, padding=(k - 1) // 2 if stride == 1 or k == 3 else 0)
+
+
+class FiLM(nn.Module):
+    """Scale and shift of a feature map from the conditioning vector (identity at initialisation)."""
+
+    def __init__(self, ch: int, cond_dim: int):
+        super().__init__()
+        self.lin = nn.Linear(cond_dim, 2 * ch)
+        nn.init.zeros_(self.lin.weight)
+        nn.init.zeros_(self.lin.bias)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        gamma, beta = self.lin(cond).chunk(2, dim=1)
+        return x * (1 + gamma[:, :, None, None].to(x.dtype)) + beta[:, :, None, None].to(x.dtype)
+
+
+class FiLMBlock(nn.Module):
+    """Residual block (two 3x3 convs) whose features are scaled/shifted by the conditioning vector.
+
+    No batch norm: measured ~30 % of a training step on CPU, and the zero-initialised second conv
+    keeps every block an identity at the start, which trains stably without it.
+    """
+
+    def __init__(self, ch: int, cond_dim: int):
+        super().__init__()
+        self.c1, self.c2 = _conv(ch, ch), _conv(ch, ch)
+        nn.init.zeros_(self.c2.weight)
+        nn.init.zeros_(self.c2.bias)
+        self.film = FiLM(ch, cond_dim)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        h = self.film(F.relu(self.c1(x)), cond)
+        return F.relu(x + self.c2(h))
+
+
+def spatial_keypoints(f: torch.Tensor) -> torch.Tensor:
+    """Per channel expected (x, y) in [-1, 1] under a softmax over the map (robomimic-style keypoints)."""
+    b, c, h, w = f.shape
+    p = torch.softmax(f.float().flatten(2), dim=-1).view(b, c, h, w)
+    ys = torch.linspace(-1, 1, h, device=f.device)
+    xs = torch.linspace(-1, 1, w, device=f.device)
+    return torch.cat([(p.sum(2) * xs).sum(-1), (p.sum(3) * ys).sum(-1)], dim=1)
+
+
+class PlannerNet(nn.Module):
+    """U-shaped CNN: 4x4/4 patch stem, FiLM residual stages at 1/4, 1/8, 1/16, decoder back to 1/4.
+
+    The heatmap head reads the 1/4-resolution decoder output (32x32 for 128 px images); soft-argmax
+    gives sub-cell pixel coordinates.
+    """
+
+    def __init__(self, cfg: ModelConfig):
+        super().__init__()
+        self.cfg = cfg
+        w = cfg.width
+        c1, c2, c3 = w, 2 * w, 3 * w
+        cin = 3 + (2 if cfg.coord_channels else 0)
+        # --- conditioning ---
+        self.words = nn.Embedding(cfg.vocab_size, cfg.embed_dim, padding_idx=0)
+        self.modes = nn.Embedding(len(MODE_IDS), cfg.embed_dim)
+        self.proprio = nn.Sequential(nn.Linear(cfg.dof + 1, cfg.embed_dim), nn.ReLU())
+        self.cond = nn.Sequential(nn.Linear(3 * cfg.embed_dim, cfg.cond_dim), nn.ReLU(),
+                                  nn.Linear(cfg.cond_dim, cfg.cond_dim), nn.ReLU())
+        # proprio normalisation (filled from training data; saved with the weights)
+        self.register_buffer("proprio_mean", torch.zeros(cfg.dof + 1))
+        self.register_buffer("proprio_std", torch.ones(cfg.dof + 1))
+        # --- encoder ---
+        self.stem = nn.Conv2d(cin, c1, 4, stride=4)  # 1/4, every pixel seen once (no detail lost)
+        self.stem_film = FiLM(c1, cfg.cond_dim)  # early fusion: the instruction shapes features from the start
+        self.s4 = FiLMBlock(c1, cfg.cond_dim)
+        self.d8, self.s8 = _conv(c1, c2, 3, 2), FiLMBlock(c2, cfg.cond_dim)  # 1/8
+        self.d16, self.s16 = _conv(c2, c3, 3, 2), FiLMBlock(c3, cfg.cond_dim)  # 1/16
+        self.ctx = nn.Linear(c3 + cfg.cond_dim, c3)  # whole-image context broadcast back into the map
+        pooled = 3 * c3 + cfg.cond_dim  # avg pool + spatial-softmax keypoints (x, y) + cond
+        if cfg.kind == "direct":
+            self.action = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, 4))
+            return
+        n = cfg.n_waypoints
+        if cfg.head == "heatmap":
+            self.l16, self.u8, self.f8 = nn.Conv2d(c3, c2, 1), _conv(c2, c2), FiLM(c2, cfg.cond_dim)
+            self.l8, self.u4, self.f4 = nn.Conv2d(c2, c1, 1), _conv(c1, c1), FiLM(c1, cfg.cond_dim)
+            self.maps = nn.Conv2d(c1, 2 * n, 1)  # n heatmaps + n height maps
+        else:
+            side = cfg.image_px // 16
+            self.fc = nn.Sequential(nn.Flatten(), nn.Linear(c3 * side * side, 256), nn.ReLU(), nn.Linear(256, 3 * n))
+        self.pooled_head = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, n + 1))
+
+    # ------------------------------------------------------------------------------------------------
+    def condition(self, tokens: torch.Tensor, mode: torch.Tensor, proprio: torch.Tensor) -> torch.Tensor:
+        mask = (tokens > 0).float()
+        words = (self.words(tokens) * mask[..., None]).sum(1) / mask.sum(1, keepdim=True).clamp_min(1.0)
+        prop = self.proprio((proprio - self.proprio_mean) / self.proprio_std)
+        return self.cond(torch.cat([words, self.modes(mode), prop], dim=1))
+
+    def encode(self, image: torch.Tensor, cond: torch.Tensor):
+        x = image * 2.0 - 1.0
+        if self.cfg.coord_channels:
+            b, _, h, w = x.shape
+            ys = torch.linspace(-1, 1, h, device=x.device, dtype=x.dtype).view(1, 1, h, 1).expand(b, 1, h, w)
+            xs = torch.linspace(-1, 1, w, device=x.device, dtype=x.dtype).view(1, 1, 1, w).expand(b, 1, h, w)
+            x = torch.cat([x, xs, ys], dim=1)
+        f4 = self.s4(F.relu(self.stem_film(self.stem(x), cond)), cond)
+        f8 = self.s8(F.relu(self.d8(f4)), cond)
+        f16 = self.s16(F.relu(self.d16(f8)), cond)
+        g = f16.float().mean((2, 3))
+        f16 = F.relu(f16 + self.ctx(torch.cat([g, cond], dim=1))[:, :, None, None].to(f16.dtype))
+        pooled = torch.cat([f16.float().mean((2, 3)), spatial_keypoints(f16), cond.float()], dim=1)
+        return f4, f8, f16, pooled
+
+    def forward(self, image, tokens, mode, proprio) -> dict[str, torch.Tensor]:
+        cfg = self.cfg
+        cond = self.condition(tokens, mode, proprio)
+        f4, f8, f16, pooled = self.encode(image, cond)
+        if cfg.kind == "direct":
+            out = self.action(pooled).float()
+            return {"delta_m": out[:, :3] * cfg.delta_scale_m, "grip_logit": out[:, 3:4]}
+        n = cfg.n_waypoints
+        pl = self.pooled_head(pooled).float()
+        res = {"grip_logit": pl[:, :n], "success_logit": pl[:, n]}
+        if cfg.head == "heatmap":
+            x = F.relu(self.f8(self.u8(F.relu(f8 + F.interpolate(self.l16(f16), scale_factor=2, mode="nearest"))), cond))
+            x = F.relu(self.f4(self.u4(F.relu(f4 + F.interpolate(self.l8(x), scale_factor=2, mode="nearest"))), cond))
+            maps = self.maps(x).float()
+            logits, heights = maps[:, :n], maps[:, n:]
+            b, _, h, w = logits.shape
+            prob = torch.softmax(logits.flatten(2), dim=-1)  # (B, n, h*w)
+            r = cfg.readout_radius_cells
+            if r > 0 and not self.training:  # mode-seeking read-out: only the cells around the peak
+                peak = prob.argmax(-1)
+                pu, pv = peak % w, peak // w
+                cu = torch.arange(w, device=x.device)
+                cv = torch.arange(h, device=x.device)
+                near = (((cv[None, None, :, None] - pv[..., None, None]).abs() <= r)
+                        & ((cu[None, None, None, :] - pu[..., None, None]).abs() <= r))
+                prob = prob * near.flatten(2)
+                prob = prob / prob.sum(-1, keepdim=True)
+            s = cfg.image_px / w
+            us = (torch.arange(w, device=x.device, dtype=torch.float32) + 0.5) * s - 0.5
+            vs = (torch.arange(h, device=x.device, dtype=torch.float32) + 0.5) * s - 0.5
+            p2 = prob.view(b, n, h, w)
+            u = (p2.sum(2) * us).sum(-1)
+            v = (p2.sum(3) * vs).sum(-1)
+            z = (prob * heights.flatten(2)).sum(-1)
+            res.update(uv_px=torch.stack([u, v], dim=-1), z_m=cfg.z_offset_m + cfg.z_scale_m * z,
+                       heat_logits=logits)
+        else:
+            out = self.fc(f16).float().view(-1, n, 3)
+            half = cfg.image_px / 2
+            res.update(uv_px=half - 0.5 + half * out[..., :2], z_m=cfg.z_offset_m + cfg.z_scale_m * out[..., 2])
+        return res
+
+
+def count_parameters(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())

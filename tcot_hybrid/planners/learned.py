@@ -1,0 +1,171 @@
+"""The learned TCoT planner: image + instruction + robot state → waypoint plan (global/local) or p(success).
+
+It runs the checkpointed network (see :mod:`tcot_hybrid.learning.model`) and turns its outputs into
+the same :class:`WaypointPlan` the oracle emits, so the classical half of the stack is unchanged:
+
+* global: the network predicts the whole eq.-4 window (L_g points, past and future); only the points
+  from the current step on (k >= 0) are returned, the past ones are the model's progress context;
+* local: all L_l + 1 points of the eq.-5 window;
+* every waypoint carries the predicted TCP height ``z_m`` [m]; the plan's ``depth_m`` is where the
+  pixel's viewing ray meets the plane z = z_m (:func:`tcot_hybrid.camera.depth_at_height`).
+
+Inputs and outputs are checked: a wrong-size, wrong-dtype or blank image, non-finite joints, an
+instruction with too many unknown words, and non-finite outputs or probabilities outside [0, 1] all
+raise :class:`PlanningError` (nothing is clipped or guessed).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tcot_hybrid.camera import CameraModel, depth_at_height
+from tcot_hybrid.errors import LiftError, PlanningError
+from tcot_hybrid.plan import WaypointPlan
+from tcot_hybrid.planners.base import MODES, Observation, Planner
+
+BLANK_STD = 1.0  # an image whose pixel values vary less than this (0-255 scale) shows nothing
+
+
+def check_image(image, camera: CameraModel) -> np.ndarray:
+    """The planner image as (H, W, 3) uint8 matching ``camera``, else PlanningError saying what is wrong."""
+    if image is None:
+        raise PlanningError("the learned planner needs the planner camera image; got None")
+    if not isinstance(image, np.ndarray):
+        raise PlanningError(f"planner image must be a numpy array, got {type(image).__name__}")
+    want = (camera.height, camera.width, 3)
+    if image.shape != want:
+        raise PlanningError(f"planner image has shape {image.shape}, expected {want} (camera {camera.name!r})")
+    if image.dtype != np.uint8:
+        if np.issubdtype(image.dtype, np.floating) and not np.isfinite(image).all():
+            raise PlanningError("planner image contains NaN or inf values")
+        raise PlanningError(f"planner image must be uint8 RGB (0-255), got dtype {image.dtype}")
+    if float(image.std()) < BLANK_STD:
+        raise PlanningError(f"planner image is blank (all pixels ~{int(image.mean())}); refusing to plan from it")
+    return image
+
+
+def check_state(q, gripper_closed, dof: int) -> np.ndarray:
+    try:
+        qa = np.asarray(q, dtype=np.float32)
+    except (TypeError, ValueError) as exc:
+        raise PlanningError(f"joint positions must be numeric, got {q!r}") from exc
+    if qa.shape != (dof,):
+        raise PlanningError(f"joint positions have shape {qa.shape}, the checkpoint expects ({dof},)")
+    if not np.isfinite(qa).all():
+        raise PlanningError(f"joint positions are not finite: {qa.tolist()}")
+    return np.r_[qa, np.float32(bool(gripper_closed))]
+
+
+def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, success_prob=None) -> None:
+    """Refuse non-finite waypoints/heights and probabilities that are not finite or outside [0, 1]."""
+    uv, z, g = np.asarray(uv_px, float), np.asarray(z_m, float), np.asarray(grip_prob, float)
+    bad = np.flatnonzero(~(np.isfinite(uv).all(-1) & np.isfinite(z)))
+    if bad.size:
+        i = int(bad[0])
+        raise PlanningError(f"planner output waypoint {i} is not finite: uv_px={uv[i].tolist()}, z_m={z[i]} "
+                            f"({bad.size} of {len(uv)} bad)")
+    bad = np.flatnonzero(~((g >= 0) & (g <= 1)))
+    if bad.size:
+        i = int(bad[0])
+        raise PlanningError(f"planner output gripper probability {g[i]} at waypoint {i} is outside [0, 1]")
+    if success_prob is not None and not (0.0 <= float(success_prob) <= 1.0):
+        raise PlanningError(f"planner output success probability {success_prob} is outside [0, 1]")
+
+
+class NetworkPlanner(Planner):
+    """Shared part of the learned and direct planners: checkpoint, input checks, one forward pass."""
+
+    kind = "trajectory"
+
+    def __init__(self, checkpoint, camera: CameraModel):
+        import torch
+
+        from tcot_hybrid.learning.vocab import Vocabulary
+
+        self.torch = torch
+        self.checkpoint = checkpoint
+        self.model = checkpoint.model.eval()
+        self.meta = checkpoint.meta
+        self.cfg = self.model.cfg
+        self.camera = camera
+        self.vocab = Vocabulary(tuple(self.meta["vocabulary"]))
+        self.max_unknown_fraction = float(self.meta.get("max_unknown_fraction", 0.5))
+        self._tokens: dict[str, object] = {}
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.checkpoint.path
+
+    def tokens(self, instruction: str):
+        if instruction not in self._tokens:
+            ids = self.vocab.encode_checked(instruction, self.cfg.max_tokens,
+                                            max_unknown_fraction=self.max_unknown_fraction)
+            self._tokens[instruction] = self.torch.from_numpy(ids)[None]
+        return self._tokens[instruction]
+
+    def infer(self, obs: Observation, mode: str) -> dict[str, np.ndarray]:
+        """Raw network outputs for ``obs`` in ``mode`` (batch of one), as numpy arrays."""
+        from tcot_hybrid.learning.model import MODE_IDS
+
+        torch = self.torch
+        img = check_image(obs.image, self.camera)
+        prop = check_state(obs.q, obs.gripper_closed, self.cfg.dof)
+        tok = self.tokens(obs.instruction)
+        x = torch.from_numpy(np.ascontiguousarray(img)).permute(2, 0, 1)[None].float().div_(255.0)
+        with torch.inference_mode():
+            out = self.model(x, tok, torch.tensor([MODE_IDS[mode]]), torch.from_numpy(prop)[None])
+        return {k: v[0].float().numpy() for k, v in out.items() if k != "heat_logits"}
+
+
+class LearnedPlanner(NetworkPlanner):
+    """TCoT planner: global / local waypoint plans and success detection from one network."""
+
+    name = "learned"
+    needs_image = True
+    kind = "trajectory"
+
+    def __init__(self, checkpoint, camera: CameraModel):
+        super().__init__(checkpoint, camera)
+        from tcot_hybrid.data.labels import TrajectoryWindowConfig
+
+        w = self.meta["windows"]
+        self.windows = TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")})
+        if self.windows.L_g != self.cfg.n_global or self.windows.L_l + 1 != self.cfg.n_local:
+            raise PlanningError(f"checkpoint windows {w} do not match its model ({self.cfg.n_global} global, "
+                                f"{self.cfg.n_local} local waypoints)")
+
+    @classmethod
+    def from_context(cls, ctx) -> LearnedPlanner:
+        from tcot_hybrid.learning.checkpoint import default_checkpoint, load_checkpoint
+
+        path = ctx.options.get("checkpoint") or default_checkpoint(ctx.robot_name, cls.kind)
+        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
+        return cls(ck, ctx.camera)
+
+    def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
+        if mode not in MODES:
+            raise PlanningError(f"learned planner mode {mode!r} is not one of {', '.join(MODES)}")
+        out = self.infer(obs, mode)
+        ng = self.cfg.n_global
+        sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, None)
+        uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float)
+        with np.errstate(over="ignore"):
+            prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
+        check_outputs(uv, z, prob)
+        try:
+            depth = depth_at_height(self.camera, uv, z)
+        except LiftError as exc:
+            raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
+        return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=prob > 0.5, camera=self.camera.name, kind=mode,
+                            step=obs.step, meta={"z_m": z, "gripper_prob": prob})
+
+    def success_probability(self, obs: Observation) -> float:
+        """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""
+        out = self.infer(obs, "detect")
+        logit = float(out["success_logit"])
+        if not np.isfinite(logit):
+            raise PlanningError(f"planner success logit is not finite: {logit}")
+        p = 1.0 / (1.0 + np.exp(-logit)) if logit > -700 else 0.0
+        check_outputs(np.zeros((0, 2)), np.zeros(0), np.zeros(0), p)
+        return float(p)

@@ -1,0 +1,266 @@
+"""Checkpoints: safetensors + JSON round trip, and every hostile or mismatched file refused with
+CheckpointError before anything in it could run (RELIABILITY rows 19 and 21)."""
+import json
+import os
+import pickle
+import struct
+
+import numpy as np
+import pytest
+import torch
+from learning_synth import agentview_camera
+from safetensors.torch import load as st_load
+from safetensors.torch import save as st_save
+
+from tcot_hybrid.camera import CameraModel
+from tcot_hybrid.errors import CheckpointError
+from tcot_hybrid.learning.checkpoint import (
+    camera_meta,
+    default_checkpoint,
+    load_checkpoint,
+    meta_path,
+    read_safetensors_header,
+    save_checkpoint,
+    sha256_bytes,
+    versions,
+)
+from tcot_hybrid.learning.model import ModelConfig, PlannerNet
+from tcot_hybrid.learning.vocab import Vocabulary
+
+VOCAB = Vocabulary.build(["put the cube on the plate"])
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return agentview_camera()
+
+
+def _meta(camera, robot="panda"):
+    return {"robot": robot, "camera": camera_meta(camera), "vocabulary": list(VOCAB.tokens),
+            "windows": {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}, "data_hash": "test", "metrics": {},
+            "versions": versions()}
+
+
+def _model(kind="trajectory", width=8):
+    torch.manual_seed(0)
+    return PlannerNet(ModelConfig(kind=kind, width=width, vocab_size=len(VOCAB))).eval()
+
+
+@pytest.fixture()
+def ckpt(tmp_path, camera):
+    path = tmp_path / "planner.safetensors"
+    save_checkpoint(path, _model(), _meta(camera))
+    return path
+
+
+def _inputs(b=2):
+    g = torch.Generator().manual_seed(1)
+    return (torch.rand(b, 3, 128, 128, generator=g), torch.tensor([[2, 3, 4, 0]] * b), torch.tensor([0, 1][:b]),
+            torch.rand(b, 8, generator=g))
+
+
+def _rewrite(path, state=None, blob=None, meta_update=None):
+    """Replace the weights (and fix the recorded hash so only the intended fault remains)."""
+    if blob is None:
+        blob = st_save(state)
+    path.write_bytes(blob)
+    meta = json.loads(meta_path(path).read_text())
+    meta["weights_sha256"] = sha256_bytes(blob)
+    meta.update(meta_update or {})
+    meta_path(path).write_text(json.dumps(meta))
+
+
+def test_round_trip_gives_identical_outputs(tmp_path, camera):
+    model = _model()
+    path = save_checkpoint(tmp_path / "a.safetensors", model, _meta(camera))
+    ck = load_checkpoint(path, robot="panda", camera=camera, kind="trajectory")
+    x = _inputs()
+    with torch.inference_mode():
+        a, b = model(*x), ck.model(*x)
+    for k in ("uv_px", "z_m", "grip_logit", "success_logit"):
+        assert torch.equal(a[k], b[k]), k
+    meta = json.loads(meta_path(path).read_text())
+    for key in ("model", "robot", "camera", "vocabulary", "windows", "data_hash", "metrics", "versions",
+                "weights_sha256"):
+        assert key in meta
+    assert meta["camera"]["K"] == camera.K.tolist() and meta["camera"]["width"] == 128
+
+
+def _pickle_bomb(marker):
+    class Boom:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+    return pickle.dumps({"weights": Boom()})
+
+
+@pytest.mark.parametrize("suffix", [".safetensors", ".pt", ".pth", ".ckpt"])
+def test_pickle_payload_refused_and_never_executed(tmp_path, ckpt, suffix):
+    marker = tmp_path / "PWNED"
+    bomb = _pickle_bomb(marker)
+    target = tmp_path / f"evil{suffix}"
+    target.write_bytes(bomb)
+    meta_path(target).write_text(meta_path(ckpt).read_text())
+    with pytest.raises(CheckpointError, match="pickle|only .safetensors"):
+        load_checkpoint(target)
+    assert not marker.exists()
+
+
+def test_torch_save_zip_renamed_refused(tmp_path, ckpt):
+    target = tmp_path / "zip.safetensors"
+    torch.save(_model().state_dict(), target)  # zip + pickle inside
+    meta_path(target).write_text(meta_path(ckpt).read_text())
+    with pytest.raises(CheckpointError, match="zip archive"):
+        load_checkpoint(target)
+
+
+def test_truncated_and_garbage_refused(tmp_path, ckpt):
+    blob = ckpt.read_bytes()
+    for n in (0, 5, 8, 100, len(blob) // 2, len(blob) - 1):
+        ckpt.write_bytes(blob[:n])
+        with pytest.raises(CheckpointError):
+            load_checkpoint(ckpt)
+    ckpt.write_bytes(blob + b"\0" * 16)
+    with pytest.raises(CheckpointError, match="trailing|truncated"):
+        load_checkpoint(ckpt)
+    ckpt.write_bytes(struct.pack("<Q", 10**12) + blob[8:])
+    with pytest.raises(CheckpointError, match="header length"):
+        load_checkpoint(ckpt)
+
+
+def test_fuzzed_files_all_refused_nothing_executed(tmp_path, ckpt):
+    """RELIABILITY #19: >= 50 hostile files, 100 % refused."""
+    rng = np.random.default_rng(0)
+    blob = bytearray(ckpt.read_bytes())
+    marker = tmp_path / "PWNED"
+    variants = [bytes(_pickle_bomb(marker))]
+    for _ in range(60):
+        b = bytearray(blob)
+        kind = rng.integers(4)
+        if kind == 0:  # cut
+            b = b[: int(rng.integers(0, len(b)))]
+        elif kind == 1:  # flip bytes anywhere (header or data)
+            for i in rng.integers(0, len(b), size=int(rng.integers(1, 8))):
+                b[i] ^= int(rng.integers(1, 256))
+        elif kind == 2:  # random bytes of the same length
+            b = bytearray(rng.integers(0, 256, size=len(b), dtype=np.uint8).tobytes())
+        else:  # pickle payload after a plausible header
+            b = b[:8] + bytearray(_pickle_bomb(marker))
+        variants.append(bytes(b))
+    refused = 0
+    for i, v in enumerate(variants):
+        p = tmp_path / f"f{i}.safetensors"
+        p.write_bytes(v)
+        meta_path(p).write_text(meta_path(ckpt).read_text())
+        with pytest.raises(CheckpointError):
+            load_checkpoint(p, robot="panda")
+        refused += 1
+    print(f"hostile checkpoints refused: {refused}/{len(variants)}")
+    assert refused == len(variants) >= 50
+    assert not marker.exists()
+
+
+def test_nan_weights_refused(ckpt):
+    state = st_load(ckpt.read_bytes())
+    state["stem.weight"][0, 0, 0, 0] = float("nan")
+    _rewrite(ckpt, state)
+    with pytest.raises(CheckpointError, match="stem.weight.*NaN"):
+        load_checkpoint(ckpt)
+
+
+def test_inf_weights_refused(ckpt):
+    state = st_load(ckpt.read_bytes())
+    state["maps.bias"][0] = float("inf")
+    _rewrite(ckpt, state)
+    with pytest.raises(CheckpointError, match="NaN or inf"):
+        load_checkpoint(ckpt)
+
+
+def test_wrong_shape_missing_and_extra_keys_refused(ckpt):
+    good = st_load(ckpt.read_bytes())
+    state = dict(good)
+    state["maps.weight"] = torch.zeros(3, 3, 1, 1)
+    _rewrite(ckpt, state)
+    with pytest.raises(CheckpointError, match="maps.weight.*shape"):
+        load_checkpoint(ckpt)
+    state = dict(good)
+    del state["stem.bias"]
+    _rewrite(ckpt, state)
+    with pytest.raises(CheckpointError, match="missing.*stem.bias"):
+        load_checkpoint(ckpt)
+    state = dict(good)
+    state["evil"] = torch.zeros(1)
+    _rewrite(ckpt, state)
+    with pytest.raises(CheckpointError, match="unexpected.*evil"):
+        load_checkpoint(ckpt)
+
+
+def test_weights_not_matching_metadata_refused(ckpt):
+    state = st_load(ckpt.read_bytes())
+    state["stem.bias"] += 1.0
+    ckpt.write_bytes(st_save(state))  # hash not updated
+    with pytest.raises(CheckpointError, match="SHA-256"):
+        load_checkpoint(ckpt)
+
+
+def test_metadata_missing_or_malformed_refused(ckpt):
+    mp = meta_path(ckpt)
+    text = mp.read_text()
+    mp.write_text("{not json")
+    with pytest.raises(CheckpointError, match="not valid JSON"):
+        load_checkpoint(ckpt)
+    meta = json.loads(text)
+    del meta["robot"]
+    mp.write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match="lacks"):
+        load_checkpoint(ckpt)
+    meta = json.loads(text)
+    meta["model"]["width"] = -3
+    mp.write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match="model config"):
+        load_checkpoint(ckpt)
+    mp.unlink()
+    with pytest.raises(CheckpointError, match="no metadata"):
+        load_checkpoint(ckpt)
+
+
+def test_other_robot_camera_image_size_or_kind_refused(ckpt, camera):
+    with pytest.raises(CheckpointError, match="robot 'panda'.*'ur5e'"):
+        load_checkpoint(ckpt, robot="ur5e", camera=camera)
+    moved = np.array(camera.T_world_cam)
+    moved[0, 3] += 0.05
+    other = CameraModel(name=camera.name, width=128, height=128, K=camera.K, T_world_cam=moved,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    with pytest.raises(CheckpointError, match="T_world_cam"):
+        load_checkpoint(ckpt, robot="panda", camera=other)
+    K = np.array(camera.K)
+    K[0, 0] *= 1.1
+    other = CameraModel(name=camera.name, width=128, height=128, K=K, T_world_cam=camera.T_world_cam,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    with pytest.raises(CheckpointError, match="K"):
+        load_checkpoint(ckpt, camera=other)
+    other = CameraModel(name=camera.name, width=96, height=96, K=camera.K, T_world_cam=camera.T_world_cam,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    with pytest.raises(CheckpointError, match="128x128 px.*96x96"):
+        load_checkpoint(ckpt, camera=other)
+    other = CameraModel(name="sideview", width=128, height=128, K=camera.K, T_world_cam=camera.T_world_cam,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    with pytest.raises(CheckpointError, match="sideview"):
+        load_checkpoint(ckpt, camera=other)
+    with pytest.raises(CheckpointError, match="'direct'"):
+        load_checkpoint(ckpt, kind="direct")
+
+
+def test_header_parser_accepts_real_files(ckpt):
+    header = read_safetensors_header(ckpt.read_bytes(), "x")
+    assert "stem.weight" in header
+
+
+def test_missing_default_checkpoint_names_robot():
+    with pytest.raises(CheckpointError, match="robot 'ur5e'.*tcot train"):
+        default_checkpoint("ur5e")
+
+
+def test_nonexistent_file(tmp_path):
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_checkpoint(tmp_path / "nope.safetensors")
+    assert not os.path.exists(tmp_path / "nope.safetensors")

@@ -1,0 +1,223 @@
+"""Learned and direct planners: plan shapes and lift cue, input/output validation, registry, defaults."""
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+from learning_synth import agentview_camera  # noqa: E402
+
+from tcot_hybrid.camera import depth_at_height  # noqa: E402
+from tcot_hybrid.errors import CheckpointError, LiftError, PlanningError  # noqa: E402
+from tcot_hybrid.learning.checkpoint import camera_meta, load_checkpoint, save_checkpoint, versions  # noqa: E402
+from tcot_hybrid.learning.model import ModelConfig, PlannerNet  # noqa: E402
+from tcot_hybrid.learning.vocab import Vocabulary, words  # noqa: E402
+from tcot_hybrid.planners import Observation, PlannerContext, list_planners, make_planner  # noqa: E402
+from tcot_hybrid.planners.direct import DirectPlanner, TcpKinematics  # noqa: E402
+from tcot_hybrid.planners.learned import LearnedPlanner, check_outputs  # noqa: E402
+from tcot_hybrid.robot import load_robot_spec  # noqa: E402
+
+INSTR = "put the cube on the plate"
+VOCAB = Vocabulary.build([INSTR, "open the drawer"])
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return agentview_camera()
+
+
+def _save(path, camera, kind="trajectory"):
+    torch.manual_seed(0)
+    model = PlannerNet(ModelConfig(kind=kind, width=8, vocab_size=len(VOCAB))).eval()
+    meta = {"robot": "panda", "camera": camera_meta(camera), "vocabulary": list(VOCAB.tokens),
+            "windows": {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}, "data_hash": "t", "metrics": {},
+            "versions": versions(), "max_unknown_fraction": 0.5, "direct_horizon": 3}
+    return save_checkpoint(path, model, meta)
+
+
+@pytest.fixture(scope="module")
+def planner(tmp_path_factory, camera):
+    path = _save(tmp_path_factory.mktemp("ck") / "p.safetensors", camera)
+    return LearnedPlanner(load_checkpoint(path, robot="panda", camera=camera, kind="trajectory"), camera)
+
+
+def _obs(step=0, image=None, q=None, instruction=INSTR, closed=False):
+    rng = np.random.default_rng(step)
+    if image is None:
+        image = rng.integers(0, 255, size=(128, 128, 3), dtype=np.uint8)
+    spec = load_robot_spec("panda")
+    return Observation(step=step, image=image, depth_m=None, q=spec.home_q.copy() if q is None else q,
+                       gripper_closed=closed, instruction=instruction)
+
+
+def test_depth_at_height_round_trip(camera):
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(0.3, 0.7, 50), rng.uniform(-0.3, 0.3, 50), rng.uniform(0.0, 0.4, 50)]
+    uv, depth = camera.project(pts)
+    d = depth_at_height(camera, uv, pts[:, 2])
+    assert np.allclose(d, depth, atol=1e-9)
+    assert np.allclose(camera.unproject(uv, d), pts, atol=1e-9)
+    with pytest.raises(LiftError, match="behind"):
+        depth_at_height(camera, uv[:1], np.array([5.0]))  # plane above the camera (z = 1 m)
+    with pytest.raises(LiftError, match="not finite"):
+        depth_at_height(camera, uv[:1], np.array([np.nan]))
+
+
+def test_global_and_local_plans(planner, camera):
+    g = planner.plan(_obs(), mode="global")
+    assert g.kind == "global" and len(g) == 51 - 25  # k >= 0 only
+    loc = planner.plan(_obs(), mode="local")
+    assert loc.kind == "local" and len(loc) == 9
+    for plan in (g, loc):
+        assert camera.in_image(plan.uv_px).all()
+        z = plan.meta["z_m"]
+        world = camera.unproject(plan.uv_px, plan.depth_m)
+        assert np.allclose(world[:, 2], z, atol=1e-6)  # depth_m is where the ray meets z = z_m
+        assert plan.gripper_closed.dtype == bool
+    p = planner.success_probability(_obs())
+    assert 0.0 <= p <= 1.0
+    with pytest.raises(PlanningError, match="mode"):
+        planner.plan(_obs(), mode="detect")
+
+
+def test_same_input_same_plan(planner):
+    a, b = planner.plan(_obs(3), mode="global"), planner.plan(_obs(3), mode="global")
+    assert np.array_equal(a.uv_px, b.uv_px) and np.array_equal(a.depth_m, b.depth_m)
+
+
+@pytest.mark.parametrize("image, match", [
+    (None, "needs the planner camera image"),
+    (np.zeros((128, 128, 3), np.uint8), "blank"),
+    (np.full((128, 128, 3), 255, np.uint8), "blank"),
+    (np.zeros((64, 64, 3), np.uint8), "shape"),
+    (np.zeros((128, 128), np.uint8), "shape"),
+    (np.full((128, 128, 3), np.nan, np.float32), "NaN"),
+    (np.random.default_rng(0).random((128, 128, 3)).astype(np.float32), "uint8"),
+])
+def test_bad_images_refused(planner, image, match):
+    with pytest.raises(PlanningError, match=match):
+        planner.plan(_obs(image=image) if image is not None else Observation(
+            step=0, image=None, depth_m=None, q=np.zeros(7), gripper_closed=False, instruction=INSTR), mode="global")
+
+
+def test_fuzzed_images_never_crash(planner):
+    """RELIABILITY #1: refused with PlanningError or planned with finite output; never anything else."""
+    rng = np.random.default_rng(1)
+    refused = planned = 0
+    for i in range(60):
+        kind = i % 6
+        if kind == 0:
+            img = rng.integers(0, 255, size=(128, 128, 3), dtype=np.uint8)
+        elif kind == 1:
+            img = np.full((128, 128, 3), rng.integers(0, 256), np.uint8)
+        elif kind == 2:
+            img = rng.random((128, 128, 3)) * 255
+        elif kind == 3:
+            img = rng.integers(0, 255, size=tuple(rng.integers(1, 200, size=3)), dtype=np.uint8)
+        elif kind == 4:
+            img = np.where(rng.random((128, 128, 3)) < 0.1, np.inf, 1.0).astype(np.float64)
+        else:
+            img = rng.integers(-5, 5, size=(128, 128, 3)).astype(np.int16)
+        try:
+            plan = planner.plan(_obs(image=img), mode="global")
+            assert np.isfinite(plan.uv_px).all() and np.isfinite(plan.depth_m).all()
+            planned += 1
+        except PlanningError:
+            refused += 1
+    assert refused + planned == 60 and refused >= 40
+
+
+def test_bad_joint_state_refused(planner):
+    with pytest.raises(PlanningError, match="not finite"):
+        planner.plan(_obs(q=np.full(7, np.nan)), mode="global")
+    with pytest.raises(PlanningError, match="shape"):
+        planner.plan(_obs(q=np.zeros(6)), mode="global")
+
+
+def test_output_validation(planner, monkeypatch):
+    with pytest.raises(PlanningError, match="outside"):
+        check_outputs(np.zeros((2, 2)), np.zeros(2), np.array([0.5, 1.5]))
+    with pytest.raises(PlanningError, match="not finite"):
+        check_outputs(np.array([[1.0, np.nan]]), np.zeros(1), np.array([0.5]))
+    with pytest.raises(PlanningError, match="success probability"):
+        check_outputs(np.zeros((0, 2)), np.zeros(0), np.zeros(0), 1.2)
+    real = planner.model.forward
+
+    def nan_forward(*a, **k):
+        out = real(*a, **k)
+        out["uv_px"] = out["uv_px"] * float("nan")
+        out["success_logit"] = out["success_logit"] * float("nan")
+        return out
+    monkeypatch.setattr(planner.model, "forward", nan_forward)
+    with pytest.raises(PlanningError, match="not finite"):
+        planner.plan(_obs(), mode="global")
+    with pytest.raises(PlanningError, match="not finite"):
+        planner.success_probability(_obs())
+
+
+def test_instruction_policy(planner):
+    assert words("Put the Cube, on the plate!") == ["put", "the", "cube", "on", "the", "plate"]
+    planner.plan(_obs(instruction="Put the cube onto the plate."), mode="global")  # 1 of 6 unknown: accepted
+    with pytest.raises(PlanningError, match="never saw"):
+        planner.plan(_obs(instruction="stapeln sie die bloecke"), mode="global")
+    with pytest.raises(PlanningError, match="empty"):
+        planner.plan(_obs(instruction="  ?! "), mode="global")
+
+
+def test_registry_and_checkpoint_selection(tmp_path, camera):
+    assert {"learned", "direct"} <= set(list_planners())
+    path = _save(tmp_path / "p.safetensors", camera)
+    ctx = PlannerContext(task=None, world=None, camera=camera, robot_name="panda", options={"checkpoint": str(path)})
+    p = make_planner("learned", ctx)
+    assert isinstance(p, LearnedPlanner) and p.needs_image
+    ctx_bad = PlannerContext(task=None, world=None, camera=camera, robot_name="ur5e", options={"checkpoint": str(path)})
+    with pytest.raises(CheckpointError, match="robot 'panda'"):
+        make_planner("learned", ctx_bad)
+    with pytest.raises(CheckpointError, match="'trajectory' planner checkpoint"):
+        make_planner("direct", ctx)
+    ctx_none = PlannerContext(task=None, world=None, camera=camera, robot_name="ur5e", options={"checkpoint": None})
+    with pytest.raises(CheckpointError, match="no shipped trajectory planner checkpoint for robot 'ur5e'"):
+        make_planner("learned", ctx_none)
+
+
+def test_direct_planner_one_waypoint_from_tcp(tmp_path, camera):
+    path = _save(tmp_path / "d.safetensors", camera, kind="direct")
+    ck = load_checkpoint(path, robot="panda", camera=camera, kind="direct")
+    p = DirectPlanner(ck, camera, robot_name="panda")
+    assert p.replan_every_step
+    obs = _obs()
+    plan = p.plan(obs, mode="direct")
+    assert plan.kind == "direct" and len(plan) == 1
+    target = camera.unproject(plan.uv_px, plan.depth_m)[0]
+    tcp = TcpKinematics("panda").tcp(obs.q)
+    assert np.allclose(target - tcp, plan.meta["delta_m"], atol=1e-6)
+
+
+def test_tcp_kinematics_matches_simulation():
+    from tcot_hybrid.config import TimingConfig
+    from tcot_hybrid.scene import SceneConfig
+    from tcot_hybrid.sim import Simulation
+    from tcot_hybrid.tasks import make_task
+
+    spec = load_robot_spec("panda")
+    sim = Simulation(spec, make_task("goal_cube_on_plate"), timing=TimingConfig(), scene=SceneConfig())
+    sim.reset(np.random.default_rng(0))
+    assert np.allclose(TcpKinematics("panda").tcp(sim.q), sim.tcp_pos(), atol=1e-9)
+    sim.close()
+
+
+def test_inference_shape_and_latency_smoke(planner):
+    """Batch-1 latency is printed, not asserted (shared CPUs)."""
+    torch.set_num_threads(2)
+    obs = _obs()
+    planner.infer(obs, "global")
+    t = []
+    for _ in range(10):
+        t0 = time.perf_counter()
+        out = planner.infer(obs, "global")
+        t.append(time.perf_counter() - t0)
+    assert out["uv_px"].shape == (60, 2) and out["z_m"].shape == (60,) and out["grip_logit"].shape == (60,)
+    print(f"batch-1 inference (test model, width 8): median {1e3 * np.median(t):.2f} ms")

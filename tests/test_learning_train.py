@@ -1,0 +1,149 @@
+"""Training on a tiny synthetic demo file: the loss goes down, the run is reproducible, the checkpoint and
+the metrics log are written; batches, augmentation, config checks and metric helpers."""
+import json
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import dataclasses  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+from learning_synth import agentview_camera, make_demo_file  # noqa: E402
+from safetensors.torch import load_file  # noqa: E402
+
+from tcot_hybrid.errors import ConfigError  # noqa: E402
+from tcot_hybrid.learning.checkpoint import load_checkpoint  # noqa: E402
+from tcot_hybrid.learning.data import instructions_of, load_frames  # noqa: E402
+from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
+from tcot_hybrid.learning.train import (  # noqa: E402
+    Batcher,
+    MixConfig,
+    TrainConfig,
+    auroc,
+    cmd_train,
+    lift_points,
+    load_train_config,
+    train,
+)
+from tcot_hybrid.learning.vocab import Vocabulary  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return agentview_camera()
+
+
+@pytest.fixture(scope="module")
+def demo_file(tmp_path_factory, camera):
+    path = tmp_path_factory.mktemp("synth") / "demos.hdf5"
+    make_demo_file(path, camera, seeds=range(12), T=24)
+    return path
+
+
+def _cfg(demo_file, out, **kw):
+    base = dict(data=str(demo_file), out=str(out), threads=1, batch_size=16, lr=3e-3, max_epochs=3,
+                stage1_epochs=1, patience=10, val_max_frames=64, model=ModelConfig(width=8), bf16=False)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_tiny_training_lowers_loss_and_writes_checkpoint(demo_file, tmp_path, camera):
+    cfg = _cfg(demo_file, tmp_path / "p.safetensors", max_epochs=4)
+    res = train(cfg, progress=False, log=lambda *_: None)
+    lines = [json.loads(x) for x in (tmp_path / "p.metrics.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in lines] == list(range(1, 5))
+    first, last = lines[0]["train"], lines[-1]["train"]
+    assert last["loss"] < 0.8 * first["loss"] and last["px"] < first["px"]
+    assert lines[0]["stage"] == 1 and lines[-1]["stage"] == 2 and lines[-1]["train"]["detect"] > 0
+    for key in ("px_median", "px_p90", "global_3d_cm_median", "global_grip_acc", "success_auroc"):
+        assert key in lines[-1]["val"]
+    ck = load_checkpoint(res.checkpoint, robot="panda", camera=camera, kind="trajectory")
+    assert ck.meta["metrics"]["best_epoch"] >= 1 and ck.meta["train_demos"] == 10
+    assert ck.meta["vocabulary"][:2] == ["<pad>", "<unk>"]
+
+
+def test_same_seed_same_weights(demo_file, tmp_path):
+    a = train(_cfg(demo_file, tmp_path / "a.safetensors", max_epochs=1), progress=False, log=lambda *_: None)
+    b = train(_cfg(demo_file, tmp_path / "b.safetensors", max_epochs=1), progress=False, log=lambda *_: None)
+    wa, wb = load_file(a.checkpoint), load_file(b.checkpoint)
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+
+
+def test_direct_kind_trains(demo_file, tmp_path, camera):
+    cfg = _cfg(demo_file, tmp_path / "d.safetensors", kind="direct", max_epochs=2)
+    assert cfg.model.kind == "direct"
+    res = train(cfg, progress=False, log=lambda *_: None)
+    assert "delta_cm_median" in res.metrics
+    load_checkpoint(res.checkpoint, robot="panda", camera=camera, kind="direct")
+
+
+def test_shift_augmentation_moves_labels_with_pixels(demo_file):
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    fs = load_frames(demo_file, "train", vocab, windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
+    cfg = TrainConfig(data=str(demo_file))
+    b = Batcher(fs, dataclasses.replace(cfg, augment=dataclasses.replace(cfg.augment, brightness=0.0, colour=0.0,
+                                                                          shift_px=2)),
+                np.random.default_rng(0))
+    idx = np.arange(0, len(fs), 7)
+    modes = np.zeros(len(idx), int)
+    plain = b.batch(idx, modes, augment=False)
+    aug = b.batch(idx, modes, augment=True)
+    center = 25  # current step's point of the global window = the gripper disc in this frame
+
+    def magenta_centroid(img):
+        m = (img[0] > 0.8) & (img[1] < 0.3) & (img[2] > 0.75)
+        ys, xs = np.nonzero(m.numpy())
+        return np.array([xs.mean(), ys.mean()])
+    moved = 0
+    for i in range(len(idx)):
+        d_img = magenta_centroid(aug["image"][i]) - magenta_centroid(plain["image"][i])
+        d_lbl = (aug["uv"][i, center] - plain["uv"][i, center]).numpy()
+        if np.all(np.abs(magenta_centroid(plain["image"][i]) - 64) < 55):  # away from the replicated border
+            assert np.allclose(d_img, d_lbl, atol=0.5)
+            moved += bool(np.any(d_lbl != 0))
+    assert moved > 0
+
+
+def test_detect_samples_are_balanced(demo_file):
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    fs = load_frames(demo_file, "train", vocab, windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
+    b = Batcher(fs, TrainConfig(data=str(demo_file)), np.random.default_rng(0))
+    idx, modes = b.indices(4000, MixConfig(global_frac=0.0, local_frac=0.0, detect_frac=1.0))
+    share = fs.success[idx].mean().item()
+    assert 0.45 < share < 0.55 and fs.success.mean().item() < 0.2
+
+
+def test_config_validation_and_files(tmp_path):
+    with pytest.raises(ConfigError, match="sum to 1"):
+        MixConfig(global_frac=0.5, local_frac=0.4, detect_frac=0.0)
+    with pytest.raises(ConfigError, match="out must end"):
+        TrainConfig(out="x.pt")
+    with pytest.raises(ConfigError, match="kind"):
+        TrainConfig(kind="diffusion")
+    p = tmp_path / "t.yaml"
+    p.write_text("max_epochs: 2\nmix_stage2: {global_frac: 0.5, local_frac: 0.25, detect_frac: 0.25}\n")
+    assert load_train_config(p).mix_stage2.detect_frac == 0.25
+    p.write_text("max_epoch: 2\n")
+    with pytest.raises(ConfigError, match="unknown key"):
+        load_train_config(p)
+    p.write_text("lr: !!python/object/apply:os.system ['touch pwned']\n")
+    with pytest.raises(ConfigError):
+        load_train_config(p)
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_cmd_train_missing_data_is_clear(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist.*--collect"):
+        cmd_train(["--data", str(tmp_path / "none.hdf5"), "--out", str(tmp_path / "x.safetensors")])
+
+
+def test_auroc_and_lift_helpers(camera):
+    assert auroc(np.array([0.1, 0.2, 0.8, 0.9]), np.array([0, 0, 1, 1])) == 1.0
+    assert auroc(np.array([0.9, 0.8, 0.2, 0.1]), np.array([0, 0, 1, 1])) == 0.0
+    assert auroc(np.array([0.5, 0.5]), np.array([0, 1])) == 0.5
+    assert np.isnan(auroc(np.array([0.5]), np.array([1])))
+    pts = np.array([[0.5, 0.1, 0.05], [0.4, -0.2, 0.3]])
+    uv, _ = camera.project(pts)
+    assert np.allclose(lift_points(camera, uv, pts[:, 2]), pts, atol=1e-9)
