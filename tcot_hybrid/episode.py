@@ -31,6 +31,7 @@ from tcot_hybrid.sim import Simulation
 from tcot_hybrid.smoothing import JointSmoother
 from tcot_hybrid.supervision import Supervisor
 from tcot_hybrid.tasks import Task, make_task
+from tcot_hybrid.jsonio import json_default as _json_default
 
 SETTLE_S = 0.2  # [s] objects settle (robot holding home) before the first planner step
 
@@ -265,12 +266,3 @@ def write_record(record: dict, out_dir: str | Path) -> Path:
     path.write_text(json.dumps(record, indent=2, default=_json_default))
     return path
 
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tcot_hybrid.errors import CheckpointError, ConfigError
+from tcot_hybrid.jsonio import json_default as _json_default
 
 FORMAT = "tcot-planner-v1"
 SUFFIX = ".safetensors"
@@ -103,15 +104,6 @@ def save_checkpoint(path: str | Path, model, meta: dict) -> Path:
     meta_path(p).write_text(json.dumps(full, indent=1, default=_json_default) + "\n")
     return p
 
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 # --- validation -----------------------------------------------------------------------------------------
