@@ -50,8 +50,11 @@ def _frame(uv_obj, uv_grip, closed, rng, px=PX) -> np.ndarray:
 
 
 def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, robot: str = "panda",
-                   instructions=("put the cube on the plate", "open the drawer")) -> None:
-    """Write a synthetic tcot-demos-v1 file with one demo per seed (seed % 10 == 0 → valid split)."""
+                   instructions=("put the cube on the plate", "open the drawer"), episode=None) -> None:
+    """Write a synthetic tcot-demos-v1 file with one demo per seed (seed % 10 == 0 → valid split).
+
+    ``episode(seed) -> dict`` overrides demo attributes (e.g. an online rollout: source, planner, success,
+    perturb, perturb_step, recover_step); an unsuccessful episode never has its success predicate hold."""
     with h5py.File(path, "w") as h5:
         h5.attrs["format"] = FORMAT
         h5.attrs["tcot_version"] = "test"
@@ -84,7 +87,12 @@ def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, r
             instr = instructions[seed % len(instructions)]
             attrs = {"task": f"synthetic_{seed % len(instructions)}", "suite": "goal", "instruction": instr,
                      "seed": int(seed), "robot": robot, "planner": "oracle", "mode": "global", "perturb": "none",
-                     "source": "demo", "success": True, "t_success": T - 3, "num_samples": T}
+                     "perturb_step": -1, "recover_step": -1, "source": "demo", "success": True, "t_success": T - 3,
+                     "num_samples": T}
+            attrs.update(episode(seed) if episode else {})
+            if not attrs["success"]:
+                arrays["task_success"] = np.zeros(T, np.uint8)
+                attrs["t_success"] = -1
             write_demo(h5, DemoRecord(attrs=attrs, arrays=arrays, env_args={}, wall_s=0.0), compression="lzf")
         env = {"robot": robot, "camera": camera.name, "K": camera.K.tolist(),
                "T_world_cam": camera.T_world_cam.tolist(), "width": camera.width, "height": camera.height,

@@ -224,3 +224,34 @@ def test_append_with_other_settings_refused_before_any_episode(files, tmp_path):
     with open_demos(p) as f:
         assert f.demos == ["demo_0"]
     assert p.read_bytes() == before  # not touched
+
+
+def test_perturbed_episodes_record_when_the_recovery_starts(tmp_path):
+    """One file holds one episode per (task, seed, perturbation); the perturbation step and the first plan
+    made after it (the start of the recovery) are demo attributes."""
+    import dataclasses as dc
+
+    from tcot_hybrid.supervision import SupervisorConfig
+
+    cfg = dc.replace(RunConfig(), supervisor=SupervisorConfig(mode="local", t_l=8))
+    path = tmp_path / "rec.hdf5"
+    s = collect(cfg, tasks=[TASK], seeds=[3], out=path, workers=1, progress=False,
+                perturbs=["none", "object_moved"])
+    assert s.written == 2
+    again = collect(cfg, tasks=[TASK], seeds=[3], out=path, workers=1, progress=False,
+                    perturbs=["none", "object_moved"])
+    assert again.written == 0 and again.already_present == 2  # resumable per (task, seed, perturbation)
+    with open_demos(path) as f:
+        by = {i.perturb: i for i in f.infos()}
+    assert by["none"].perturb_step == -1 and by["none"].recover_step == -1
+    moved = by["object_moved"]
+    assert moved.perturb_step == 5 and moved.recover_step == 8  # local plans every 8 steps
+    assert moved.success
+
+
+def test_collect_refuses_unknown_perturbation(tmp_path, capsys):
+    rc = main(["collect", "--tasks", TASK, "--perturb", "earthquake", "--episodes-per-task", "1",
+               "--out", str(tmp_path / "x.hdf5")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "earthquake" in err and "object_moved" in err
+    assert not (tmp_path / "x.hdf5").exists()

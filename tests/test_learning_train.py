@@ -147,3 +147,62 @@ def test_auroc_and_lift_helpers(camera):
     pts = np.array([[0.5, 0.1, 0.05], [0.4, -0.2, 0.3]])
     uv, _ = camera.project(pts)
     assert np.allclose(lift_points(camera, uv, pts[:, 2]), pts, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def online_file(tmp_path_factory, camera):
+    """Online episodes: failed learned rollouts (seeds 20-25) and oracle recoveries (26-31) whose recovery
+    starts at step 8."""
+    path = tmp_path_factory.mktemp("online") / "online.hdf5"
+
+    def episode(seed):
+        if seed < 26:
+            return {"source": "rollout", "planner": "learned", "success": False, "perturb": "object_moved",
+                    "perturb_step": 5, "recover_step": -1}
+        return {"perturb": "object_drop", "perturb_step": 5, "recover_step": 8}
+    make_demo_file(path, camera, seeds=range(20, 32), T=24, episode=episode)
+    return path
+
+
+def test_online_frames_detect_everywhere_imitate_only_recoveries(online_file, demo_file):
+    from tcot_hybrid.learning.data import concat_frames, load_online_frames
+
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    kw = dict(windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
+    on = load_online_frames(online_file, "train", vocab, detect_stride=3, **kw)
+    seeds = {20, 30}  # validation seeds (seed % 10 == 0) stay out of the train split
+    assert len(on.demos) == 12 - len(seeds)
+    rollout = np.isin(on.demo, [i for i, n in enumerate(on.demos) if i < 5])  # demos of seeds 21-25
+    assert not on.traj[rollout].any() and not on.success[torch.from_numpy(rollout)].any()
+    assert set(on.t[rollout]) == set(range(0, 24, 3))  # every 3rd frame kept for detection
+    rec = ~rollout
+    assert on.traj[rec].any() and on.t[rec & on.traj].min() == 8  # imitated from the recovery on
+    assert (on.t[rec & ~on.traj] % 3 == 0).all()
+    assert set(on.t[rec & (on.success.numpy() > 0.5)]) == {21, 22, 23}  # success frames always kept
+    demos = load_frames(demo_file, "train", vocab, **kw)
+    both = concat_frames([demos, on])
+    assert len(both) == len(demos) + len(on) and both.demos == demos.demos + on.demos
+    assert both.demo.max() == len(both.demos) - 1 and both.traj[: len(demos)].all()
+    b = Batcher(both, TrainConfig(data=str(demo_file)), np.random.default_rng(0))
+    idx, modes = b.indices(2000, MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
+    assert both.traj[idx[modes <= 1]].all()  # trajectories only from imitated frames
+    assert (~both.traj[idx[modes == 2]]).any()  # detection also sees failed rollouts
+
+
+def test_stage2_finetune_from_checkpoint_with_online_data(demo_file, online_file, tmp_path):
+    first = train(_cfg(demo_file, tmp_path / "s1.safetensors", max_epochs=1, stage1_epochs=1),
+                  progress=False, log=lambda *_: None)
+    cfg = _cfg(demo_file, tmp_path / "s2.safetensors", max_epochs=1, stage1_epochs=0, init=str(first.checkpoint),
+               online_data=(str(online_file),), epoch_samples=64)
+    logs = []
+    res = train(cfg, progress=False, log=logs.append)
+    assert any("initialised from" in line for line in logs)
+    lines = [json.loads(x) for x in (tmp_path / "s2.metrics.jsonl").read_text().splitlines()]
+    assert lines[0]["stage"] == 2 and lines[0]["train"]["detect"] > 0
+    assert lines[0]["val"]["detect_frames"] > lines[0]["val"]["frames"]  # failed rollouts scored for detection
+    meta = load_checkpoint(res.checkpoint).meta
+    assert meta["online_data"] == [str(online_file)] and meta["init"] == str(first.checkpoint)
+    assert "+" in meta["data_hash"]
+    with pytest.raises(ConfigError, match="init checkpoint .* has model"):
+        train(_cfg(demo_file, tmp_path / "s3.safetensors", max_epochs=1, init=str(first.checkpoint),
+                   model=ModelConfig(width=16)), progress=False, log=lambda *_: None)

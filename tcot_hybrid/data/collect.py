@@ -46,8 +46,11 @@ class DemoRecord:
 
 
 def collection_hash(cfg) -> str:
-    """Hash of the run config with the per-episode fields (task, seed) blanked: one value per file."""
-    return dataclasses.replace(cfg, task="*", seed=0).digest()
+    """Hash of the run config with the per-episode fields (task, seed, perturbation) blanked: one value per
+    file. The perturbation is per episode (demo attributes ``perturb``, ``perturb_step``)."""
+    from tcot_hybrid.perturbations import PerturbConfig
+
+    return dataclasses.replace(cfg, task="*", seed=0, perturb=PerturbConfig()).digest()
 
 
 def _quat_wxyz(xmat: np.ndarray) -> np.ndarray:
@@ -113,11 +116,16 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         "actions": actions,
     }
     hits = np.flatnonzero(succ)
+    fired = [e["step"] for e in s.executor.events if e["kind"] == "perturbation"]
+    # first plan made at or after the perturbation: from there on the track shows the recovery
+    replans = [e["step"] for e in s.executor.events if e["kind"] == "plan_adopted" and fired and e["step"] >= fired[0]]
     attrs = {
         "task": cfg.task, "suite": task.suite, "instruction": task.instruction, "seed": int(cfg.seed),
         "robot": cfg.robot, "planner": cfg.planner, "mode": cfg.supervisor.mode,
         "perturb": str(getattr(getattr(cfg, "perturb", None), "name", "none")),
         "source": "demo" if cfg.planner == "oracle" else "rollout",
+        "perturb_step": int(fired[0]) if fired else -1,
+        "recover_step": int(replans[0]) if replans else -1,
         "success": bool(rec["success"]), "t_success": int(hits[0]) if hits.size else -1, "num_samples": n,
         "fault": rec.get("fault") or "",
     }
@@ -215,9 +223,11 @@ def _open_for_append(path: Path):
     return h5
 
 
-def _existing_pairs(h5) -> set[tuple[str, int]]:
+def _existing_episodes(h5) -> set[tuple[str, int, str]]:
+    """(task, seed, perturbation) of every complete demo in the file."""
     data = h5["data"]
-    return {(str(data[n].attrs["task"]), int(data[n].attrs["seed"])) for n in data if n.startswith(DEMO_PREFIX)}
+    return {(str(data[n].attrs["task"]), int(data[n].attrs["seed"]), str(data[n].attrs["perturb"]))
+            for n in data if n.startswith(DEMO_PREFIX)}
 
 
 def _check_env(path: Path, h5, env_args: dict) -> None:
@@ -276,8 +286,12 @@ class CollectSummary:
 
 
 def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, workers: int = 2,
-            valid_every: int = VALID_EVERY, compression: str = "gzip", progress: bool = True) -> CollectSummary:
-    """Collect one demo per (task, seed) not yet in ``out`` (resumable). Returns a summary."""
+            valid_every: int = VALID_EVERY, compression: str = "gzip", progress: bool = True,
+            perturbs: list[str] | None = None) -> CollectSummary:
+    """Collect one episode per (task, seed, perturbation) not yet in ``out`` (resumable). ``perturbs``
+    defaults to the base config's perturbation. Returns a summary."""
+    from tcot_hybrid.perturbations import PerturbConfig
+
     from tqdm import tqdm
 
     path = Path(out)
@@ -295,10 +309,14 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
     n_train = n_valid = 0
     try:
         _precheck_env(path, h5, base_cfg)
-        done = _existing_pairs(h5)
-        pairs = [(t, s) for s in seeds for t in tasks]  # seed-major: an interruption leaves tasks balanced
-        todo = [(t, s) for (t, s) in pairs if (t, s) not in done]
-        cfgs = [dataclasses.replace(base_cfg, task=t, seed=s) for (t, s) in todo]
+        done = _existing_episodes(h5)
+        perturbs = perturbs or [base_cfg.perturb.name]
+        # seed-major: an interruption leaves tasks and perturbations balanced
+        pairs = [(t, s, p) for s in seeds for p in perturbs for t in tasks]
+        todo = [key for key in pairs if key not in done]
+        cfgs = [dataclasses.replace(base_cfg, task=t, seed=s,
+                                    perturb=PerturbConfig(**{**dataclasses.asdict(base_cfg.perturb), "name": p}))
+                for (t, s, p) in todo]
         pool = None
         try:
             if workers == 1 or len(cfgs) <= 1:
@@ -357,6 +375,8 @@ def _parser() -> argparse.ArgumentParser:
                         "anything else is recorded as source=rollout)")
     p.add_argument("--checkpoint", help="checkpoint for a learned planner")
     p.add_argument("--mode", help="supervisor mode (default: the config's, global)")
+    p.add_argument("--perturb", help="comma-separated perturbations, one episode per (task, seed, perturbation) "
+                                     "(default: the config's, none); `tcot list` shows them")
     p.add_argument("--episodes-per-task", type=int, default=50, help="seeds per task (default 50)")
     p.add_argument("--seed-start", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
@@ -375,6 +395,7 @@ def _parser() -> argparse.ArgumentParser:
 def cmd_collect(argv: list[str]) -> int:
     from tcot_hybrid.episode import validate_names
     from tcot_hybrid.errors import unknown_name
+    from tcot_hybrid.perturbations import PerturbConfig
     from tcot_hybrid.run_config import RunConfig, load_config_file
     from tcot_hybrid.tasks import SUITES, list_tasks
 
@@ -406,8 +427,11 @@ def cmd_collect(argv: list[str]) -> int:
     for t in tasks:
         validate_names(dataclasses.replace(base, task=t))
     out = args.out or Path("data") / f"demos_{base.robot}.hdf5"
-    summary = collect(base, tasks=tasks, seeds=seeds, out=out, workers=args.workers,
-                      valid_every=args.valid_every, compression=args.compression, progress=not args.quiet)
+    perturbs = [p.strip() for p in args.perturb.split(",") if p.strip()] if args.perturb else None
+    for name in perturbs or []:
+        PerturbConfig(name=name)  # unknown names fail here, listing the valid ones
+    summary = collect(base, tasks=tasks, seeds=seeds, out=out, workers=args.workers, valid_every=args.valid_every,
+                      compression=args.compression, progress=not args.quiet, perturbs=perturbs)
     print(summary.line())
     for task, seed, msg in summary.crashes:
         print(f"  crashed: {task} seed {seed}: {msg} (re-run to retry)")

@@ -4,7 +4,8 @@ Layout (``docs/dataset.md`` describes every field)::
 
     /                     attrs: format="tcot-demos-v1", tcot_version
     /data                 attrs: total, env_args (JSON)
-    /data/demo_<i>        attrs: task, suite, instruction, seed, robot, planner, mode, perturb, source,
+    /data/demo_<i>        attrs: task, suite, instruction, seed, robot, planner, mode, perturb, perturb_step,
+                                 recover_step, source,
                                  success, t_success, num_samples
         obs/<camera>_image, obs/robot0_*, obs/eef_uv_px, obs/eef_depth_m, task_success, actions
     /mask/train, /mask/valid   demo names (bytes), split by seed
@@ -47,7 +48,7 @@ ENV_ARGS_KEYS = ("robot", "camera", "K", "T_world_cam", "width", "height", "sim_
                  "config_hash")
 DEMO_ATTRS: dict[str, type] = {
     "task": str, "suite": str, "instruction": str, "seed": int, "robot": str, "planner": str, "mode": str,
-    "perturb": str, "source": str, "success": bool, "t_success": int, "num_samples": int,
+    "perturb": str, "perturb_step": int, "recover_step": int, "source": str, "success": bool, "t_success": int, "num_samples": int,
 }
 SOURCES = ("demo", "rollout")
 
@@ -78,6 +79,8 @@ class DemoInfo:
     planner: str
     mode: str
     perturb: str
+    perturb_step: int
+    recover_step: int
     source: str
     success: bool
     t_success: int
@@ -212,6 +215,7 @@ class DemoFile:
             self._infos[name] = info
         self.dof: int | None = dof
         self.masks: dict[str, list[str]] = {}
+        self.valid_every = VALID_EVERY
         if "mask" not in f:
             if not allow_partial:
                 raise self._fail("missing group /mask (collection did not finish); re-run tcot collect "
@@ -225,6 +229,7 @@ class DemoFile:
             if unknown:
                 raise self._fail(f"/mask/{split} names demos that are not in the file: {unknown[:5]}")
             self.masks[split] = members
+        self.valid_every = int(_attr(f["mask"].attrs.get("valid_every", VALID_EVERY)))
 
     def _validate_demo(self, name: str, h: int, w: int) -> DemoInfo:
         g = self._h5["data"][name]

@@ -6,9 +6,16 @@ One row per demo sample t (the state at the start of planner step t). Labels per
   success (task predicate at t) for detect; direct action (TCP displacement over ``direct_horizon``
   steps and the gripper bit at the end of it) for the direct baseline.
 Images stay uint8 (T, H, W, 3); batches are converted on the fly.
+
+Online data (paper eq. 7, stage 2) comes from further files of the same format (``tcot collect
+--planner learned`` rollouts, ``tcot collect --perturb ...`` oracle recoveries): every episode, failed or
+not, gives failure-detection frames labelled by the simulator's success predicate; a successful oracle
+episode also gives trajectory labels from its perturbation step on (how to recover from the perturbed
+state). ``FrameSet.traj`` marks the frames whose trajectory labels are imitated.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +48,7 @@ class FrameSet:
     l_grip: torch.Tensor
     l_xyz: torch.Tensor
     success: torch.Tensor  # (N,) float 0/1
+    traj: np.ndarray  # (N,) bool: trajectory labels are imitated (else a failure-detection frame only)
     d_delta: torch.Tensor  # (N, 3) [m] TCP displacement over direct_horizon steps
     d_grip: torch.Tensor  # (N,) float 0/1 gripper command direct_horizon steps ahead
     demo: np.ndarray  # (N,) demo index into ``demos``
@@ -77,34 +85,74 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
             names = names[:max_demos]
         if not names:
             raise DatasetError(f"demo file {path}: split {split!r} has no usable demos")
-        cols: dict[str, list] = {k: [] for k in ("img", "tok", "prop", "g", "l", "gx", "lx", "succ", "dd", "dg",
-                                                 "demo", "t")}
-        tasks, instrs = [], []
-        for di, name in enumerate(names):
-            info = f.info(name)
-            arr = f.read(name, _KEYS)
-            img = f.images(name)
-            T = info.num_samples
-            track = track_from_arrays(arr)
-            gl, ll = global_labels(track, windows), local_labels(track, windows)
-            pos = arr["obs/robot0_eef_pos"].astype(np.float32)
-            grip = arr["obs/robot0_gripper_closed"].astype(np.float32)
-            ids, _, _ = vocab.encode(info.instruction, max_tokens)
-            ahead = np.minimum(np.arange(T) + direct_horizon, T - 1)
-            cols["img"].append(img)
-            cols["tok"].append(np.repeat(ids[None], T, axis=0))
-            cols["prop"].append(np.c_[arr["obs/robot0_joint_pos"], grip].astype(np.float32))
-            cols["g"].append((gl.uv_px, gl.z_m, gl.gripper_closed.astype(np.float32)))
-            cols["l"].append((ll.uv_px, ll.z_m, ll.gripper_closed.astype(np.float32)))
-            cols["gx"].append(pos[gl.indices])
-            cols["lx"].append(pos[ll.indices])
-            cols["succ"].append(arr["task_success"].astype(np.float32))
-            cols["dd"].append(pos[ahead] - pos)
-            cols["dg"].append(grip[ahead])
-            cols["demo"].append(np.full(T, di))
-            cols["t"].append(np.arange(T))
-            tasks.append(info.task)
-            instrs.append(info.instruction)
+        return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
+                            keep=lambda info, T: (np.ones(T, bool), np.ones(T, bool)))
+
+
+def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
+                       max_tokens: int, direct_horizon: int, detect_stride: int = 1) -> FrameSet:
+    """Online episodes of ``path`` (split by seed like the demos, failed episodes included): every
+    ``detect_stride``-th frame plus every success frame for failure detection; the frames of successful
+    oracle episodes from their first plan after the perturbation on (``recover_step``) also carry trajectory
+    labels (recovery demonstrations)."""
+    from tcot_hybrid.data.dataset import is_valid_seed
+
+    if split not in ("train", "valid"):
+        raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
+    with open_demos(path) as f:
+        every = int(f.valid_every)
+        names = [i.name for i in f.infos() if is_valid_seed(i.seed, every) == (split == "valid")]
+        if not names:
+            raise DatasetError(f"online data file {path}: split {split!r} has no episodes")
+
+        def keep(info, T: int) -> tuple[np.ndarray, np.ndarray]:
+            t = np.arange(T)
+            traj = np.zeros(T, bool)
+            if info.source == "demo" and info.success and info.perturb_step < 0:
+                traj[:] = True
+            elif info.source == "demo" and info.success and info.recover_step >= 0:
+                traj = t >= info.recover_step  # before it the track still follows the stale plan
+            detect = (t % detect_stride == 0) | ((t >= info.t_success) & (info.t_success >= 0))
+            return traj | detect, traj
+
+        return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
+                            keep=keep)
+
+
+def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryWindowConfig, max_tokens: int,
+                 direct_horizon: int, keep) -> FrameSet:
+    """Frames of demos ``names`` of open file ``f``; ``keep(info, T) -> (rows kept, rows with trajectory
+    labels)`` as boolean masks over the demo's samples (labels always come from the whole track)."""
+    cols: dict[str, list] = {k: [] for k in ("img", "tok", "prop", "g", "l", "gx", "lx", "succ", "dd", "dg",
+                                             "demo", "t", "traj")}
+    tasks, instrs = [], []
+    for di, name in enumerate(names):
+        info = f.info(name)
+        arr = f.read(name, _KEYS)
+        T = info.num_samples
+        rows, traj = keep(info, T)
+        track = track_from_arrays(arr)
+        gl, ll = global_labels(track, windows), local_labels(track, windows)
+        pos = arr["obs/robot0_eef_pos"].astype(np.float32)
+        grip = arr["obs/robot0_gripper_closed"].astype(np.float32)
+        ids, _, _ = vocab.encode(info.instruction, max_tokens)
+        ahead = np.minimum(np.arange(T) + direct_horizon, T - 1)
+        r = np.flatnonzero(rows)
+        cols["img"].append(f.images(name)[r])
+        cols["tok"].append(np.repeat(ids[None], len(r), axis=0))
+        cols["prop"].append(np.c_[arr["obs/robot0_joint_pos"], grip].astype(np.float32)[r])
+        cols["g"].append((gl.uv_px[r], gl.z_m[r], gl.gripper_closed[r].astype(np.float32)))
+        cols["l"].append((ll.uv_px[r], ll.z_m[r], ll.gripper_closed[r].astype(np.float32)))
+        cols["gx"].append(pos[gl.indices[r]])
+        cols["lx"].append(pos[ll.indices[r]])
+        cols["succ"].append(arr["task_success"].astype(np.float32)[r])
+        cols["dd"].append((pos[ahead] - pos)[r])
+        cols["dg"].append(grip[ahead][r])
+        cols["demo"].append(np.full(len(r), di))
+        cols["t"].append(r)
+        cols["traj"].append(traj[r])
+        tasks.append(info.task)
+        instrs.append(info.instruction)
 
     def cat(key, j=None):
         xs = cols[key] if j is None else [c[j] for c in cols[key]]
@@ -114,9 +162,28 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
         images=cat("img"), tokens=cat("tok"), proprio=cat("prop"),
         g_uv=cat("g", 0).float(), g_z=cat("g", 1).float(), g_grip=cat("g", 2), g_xyz=cat("gx"),
         l_uv=cat("l", 0).float(), l_z=cat("l", 1).float(), l_grip=cat("l", 2), l_xyz=cat("lx"),
-        success=cat("succ"), d_delta=cat("dd"), d_grip=cat("dg"),
+        success=cat("succ"), traj=np.concatenate(cols["traj"]), d_delta=cat("dd"), d_grip=cat("dg"),
         demo=np.concatenate(cols["demo"]), t=np.concatenate(cols["t"]), demos=names, tasks=tasks,
         instructions=instrs)
+
+
+def concat_frames(sets: list[FrameSet]) -> FrameSet:
+    """One FrameSet of several (demo indices renumbered so each still names its own demo)."""
+    if len(sets) == 1:
+        return sets[0]
+    offsets = np.cumsum([0] + [len(s.demos) for s in sets[:-1]])
+    out = {}
+    for fld in dataclasses.fields(FrameSet):
+        vals = [getattr(s, fld.name) for s in sets]
+        if fld.name == "demo":
+            out["demo"] = np.concatenate([v + o for v, o in zip(vals, offsets)])
+        elif isinstance(vals[0], torch.Tensor):
+            out[fld.name] = torch.cat(vals)
+        elif isinstance(vals[0], np.ndarray):
+            out[fld.name] = np.concatenate(vals)
+        else:
+            out[fld.name] = [x for v in vals for x in v]
+    return FrameSet(**out)
 
 
 def instructions_of(path: str | Path, split: str = "train") -> list[str]:

@@ -79,6 +79,14 @@ class TrainConfig:
     """One training run. Stored as YAML/TOML; every field is also a ``tcot train`` flag.
 
     data:            demonstration file (``tcot collect`` output) [path]
+    online_data:     further files of online episodes (``tcot collect --planner learned`` rollouts, oracle
+                     recoveries under ``--perturb``): failure-detection frames from every episode, labelled by
+                     the success predicate (paper eq. 7), and recovery trajectories from successful oracle
+                     episodes after their perturbation [paths]
+    online_detect_stride: keep every k-th frame of an online episode for detection (neighbouring frames are
+                     nearly identical; success frames are always kept). Up: less memory, fewer negatives.
+    init:            start from this checkpoint's weights (same data vocabulary and model shape), e.g. stage 2
+                     on online rollouts after a stage-1 run [path]; None = random init.
     out:             checkpoint to write (``.safetensors``; ``.json`` metadata and ``.metrics.jsonl`` next to it)
     kind:            "trajectory" (TCoT planner) or "direct" (next-action baseline)
     seed:            seeds weights, sampling and augmentation; same seed + data + config = same weights
@@ -90,7 +98,9 @@ class TrainConfig:
                      plans are made. Up: better first plans, less practice on later steps.
     batch_size:      samples per step. Up: smoother gradients, slower steps.
     lr:              peak AdamW learning rate (one-cycle schedule). weight_decay: AdamW decay.
-    max_epochs:      epochs (one epoch = as many samples as training frames). Up: better fit, longer.
+    max_epochs:      epochs (one epoch = ``epoch_samples`` samples). Up: better fit, longer.
+    epoch_samples:   samples per epoch; None = as many as training frames. Set it when online data makes the
+                     frame count large (fine-tuning needs fewer steps than a pass over every frame).
     max_minutes:     wall-clock cap [min]; stops after the current epoch's validation.
     patience:        stop after this many epochs without a better validation score.
     stage1_epochs:   epochs of stage 1 (trajectory only) before detection joins (trajectory kind only).
@@ -107,6 +117,9 @@ class TrainConfig:
     """
 
     data: str = "data/demos_panda.hdf5"
+    online_data: tuple[str, ...] = ()
+    online_detect_stride: int = 2
+    init: str | None = None
     out: str = "runs/train/planner.safetensors"
     kind: str = "trajectory"
     seed: int = 0
@@ -114,10 +127,11 @@ class TrainConfig:
     batch_size: int = 64
     lr: float = 3e-3
     weight_decay: float = 1e-4
-    max_epochs: int = 12
+    max_epochs: int = 7
+    epoch_samples: int | None = None
     max_minutes: float = 11.0
     patience: int = 4
-    stage1_epochs: int = 6
+    stage1_epochs: int = 3
     global_t0_frac: float = 0.25
     mix_stage1: MixConfig = field(default_factory=MixConfig)
     mix_stage2: MixConfig = field(default_factory=lambda: MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
@@ -125,7 +139,7 @@ class TrainConfig:
     max_train_demos: int | None = None
     val_max_frames: int = 2000
     bf16: bool = True
-    heatmap_ce: float = 0.0
+    heatmap_ce: float = 0.5
     max_unknown_fraction: float = 0.5
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -135,9 +149,11 @@ class TrainConfig:
         require_choice("kind", self.kind, ("trajectory", "direct"))
         for name in ("seed",):
             require_int(name, getattr(self, name), minimum=0)
-        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames"):
+        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_detect_stride"):
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
+        if self.epoch_samples is not None:
+            require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
         if not 0 <= self.global_t0_frac <= 1:
             raise ConfigError(f"global_t0_frac must be in [0, 1], got {self.global_t0_frac}")
         require_int("stage1_epochs", self.stage1_epochs, minimum=0)
@@ -166,14 +182,15 @@ class Batcher:
         self.f, self.cfg, self.rng, self.torch = frames, cfg, rng, torch
         succ = frames.success.numpy() > 0.5
         self.pos_idx, self.neg_idx = np.flatnonzero(succ), np.flatnonzero(~succ)
-        self.t0_idx = np.flatnonzero(frames.t == 0)
+        self.traj_idx = np.flatnonzero(frames.traj)  # global / local samples imitate these frames only
+        self.t0_idx = np.flatnonzero((frames.t == 0) & frames.traj)
 
     def indices(self, n: int, mix: MixConfig) -> tuple[np.ndarray, np.ndarray]:
         rng = self.rng
         modes = rng.choice(3, size=n, p=mix.as_array())
-        idx = rng.integers(0, len(self.f), size=n)
+        idx = self.traj_idx[rng.integers(0, len(self.traj_idx), size=n)]
         glob = np.flatnonzero(modes == MODE_IDS["global"])
-        if glob.size and self.cfg.global_t0_frac > 0:  # the frames closed-loop global plans are made from
+        if glob.size and self.cfg.global_t0_frac > 0 and self.cfg.kind == "trajectory":  # the frames closed-loop global plans are made from
             at0 = glob[rng.random(glob.size) < self.cfg.global_t0_frac]
             idx[at0] = rng.choice(self.t0_idx, size=at0.size)
         det = np.flatnonzero(modes == MODE_IDS["detect"])
@@ -339,10 +356,11 @@ def _stats(prefix: str, err: np.ndarray, scale: float = 1.0) -> dict:
 def trajectory_metrics(model, frames, idx: np.ndarray, camera, *, n_global: int, center: int) -> dict:
     """Held-out figures: pixel / 3D error, gripper accuracy (executed points: global k >= 0, all local),
     at all steps and at t = 0, plus success-detection AUROC."""
+    all_idx, idx = idx, idx[frames.traj[idx]]  # trajectory figures on imitated frames, detection on all
     g = predict(model, frames, idx, "global")
     lo = predict(model, frames, idx, "local")
     ti = idx
-    out: dict = {"frames": int(len(idx))}
+    out: dict = {"frames": int(len(idx)), "detect_frames": int(len(all_idx))}
     sel_g = slice(center, n_global)
     for name, o, uv_t, z_t, gr_t, xyz_t, sl in (
             ("global", g, frames.g_uv, frames.g_z, frames.g_grip, frames.g_xyz, sel_g),
@@ -372,9 +390,9 @@ def trajectory_metrics(model, frames, idx: np.ndarray, camera, *, n_global: int,
     pooled = np.concatenate([np.linalg.norm(g["uv_px"][:, sel_g] - frames.g_uv[ti][:, center:].numpy(), axis=-1).ravel(),
                              np.linalg.norm(lo["uv_px"][:, n_global:] - frames.l_uv[ti].numpy(), axis=-1).ravel()])
     out.update(_stats("px", pooled))
-    d = predict(model, frames, idx, "detect")
+    d = predict(model, frames, all_idx, "detect")
     p = 1 / (1 + np.exp(-d["success_logit"]))
-    y = frames.success[ti].numpy()
+    y = frames.success[all_idx].numpy()
     out["success_auroc"] = round(auroc(p, y), 4)
     out["success_acc"] = round(float(((p > 0.5) == (y > 0.5)).mean()), 4)
     return out
@@ -407,7 +425,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     from tqdm import tqdm
 
     from tcot_hybrid.learning.checkpoint import camera_meta, save_checkpoint, versions
-    from tcot_hybrid.learning.data import env_of, file_hash, instructions_of, load_frames
+    from tcot_hybrid.learning.data import concat_frames, env_of, file_hash, instructions_of, load_frames, load_online_frames
     from tcot_hybrid.learning.model import PlannerNet, count_parameters
     from tcot_hybrid.learning.vocab import Vocabulary
 
@@ -426,12 +444,24 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     va = load_frames(cfg.data, "valid", vocab, **load)
     log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
+    data_files = [cfg.data, *cfg.online_data]
+    for path in cfg.online_data:
+        _check_same_env(env, env_of(path)[0], path, cfg.data)
+        on_tr, on_va = (load_online_frames(path, split, vocab, detect_stride=cfg.online_detect_stride, **load)
+                        for split in ("train", "valid"))
+        log(f"online data {path}: {len(on_tr.demos)} train episodes / {len(on_tr)} frames "
+            f"({int(on_tr.traj.sum())} with recovery trajectories, {int(on_tr.success.sum())} success), "
+            f"{len(on_va.demos)} valid episodes / {len(on_va)} frames")
+        tr, va = concat_frames([tr, on_tr]), concat_frames([va, on_va])
     model = PlannerNet(mcfg)
-    model.proprio_mean.copy_(tr.proprio.mean(0))
-    model.proprio_std.copy_(tr.proprio.std(0).clamp_min(1e-3))
+    if cfg.init is not None:
+        _load_init(model, cfg.init, vocab, log)
+    else:
+        model.proprio_mean.copy_(tr.proprio.mean(0))
+        model.proprio_std.copy_(tr.proprio.std(0).clamp_min(1e-3))
     model = model.to(memory_format=torch.channels_last)
     log(f"model {mcfg.kind}/{mcfg.head}: {count_parameters(model) / 1e6:.2f} M parameters")
-    steps_per_epoch = math.ceil(len(tr) / cfg.batch_size)
+    steps_per_epoch = math.ceil((cfg.epoch_samples or len(tr)) / cfg.batch_size)
     total_steps = steps_per_epoch * cfg.max_epochs
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=total_steps, pct_start=0.15)
@@ -442,11 +472,13 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     log_path = out.with_suffix(".metrics.jsonl")
     log_path.write_text("")
     best_score, best_state, best_metrics, best_epoch, bad_epochs = math.inf, None, {}, -1, 0
-    data_hash = file_hash(cfg.data)
+    data_hash = "+".join(file_hash(p) for p in data_files)
     epoch = 0
     for epoch in range(1, cfg.max_epochs + 1):
         model.train()
         mix = cfg.mix_stage1 if epoch <= cfg.stage1_epochs else cfg.mix_stage2
+        if mcfg.kind == "direct":  # one objective: every frame equally likely
+            mix = MixConfig(global_frac=1.0, local_frac=0.0, detect_frac=0.0)
         sums: dict[str, float] = {}
         t_ep = time.perf_counter()
         bar = tqdm(range(steps_per_epoch), desc=f"epoch {epoch}/{cfg.max_epochs}", unit="step", leave=False,
@@ -483,7 +515,9 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         else:
             m = trajectory_metrics(model, va, vidx, camera, n_global=mcfg.n_global, center=cfg.windows.global_center)
             score = m["px_median"] + 0.5 * m["global_t0_px_median"]
-        rec = {"epoch": epoch, "stage": 1 if mix is cfg.mix_stage1 else 2,
+            if epoch > cfg.stage1_epochs and math.isfinite(m["success_auroc"]):
+                score += DETECT_SCORE_PX * (1.0 - m["success_auroc"])
+        rec = {"epoch": epoch, "stage": 1 if epoch <= cfg.stage1_epochs or mcfg.kind == "direct" else 2,
                "train": {k: round(v / steps_per_epoch, 5) for k, v in sums.items()},
                "val": m, "score": round(score, 4), "lr": sched.get_last_lr()[0],
                "epoch_train_s": round(train_s, 1), "elapsed_s": round(time.perf_counter() - t_start, 1),
@@ -508,7 +542,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         "robot": env["robot"], "camera": camera_meta(camera), "vocabulary": list(vocab.tokens),
         "windows": dataclasses.asdict(cfg.windows), "direct_horizon": cfg.direct_horizon,
         "max_unknown_fraction": cfg.max_unknown_fraction,
-        "data_hash": data_hash, "data_file": str(cfg.data), "data_env_config_hash": env.get("config_hash"),
+        "data_hash": data_hash, "data_file": str(cfg.data), "online_data": list(cfg.online_data),
+        "init": cfg.init, "data_env_config_hash": env.get("config_hash"),
         "train_demos": len(tr.demos), "train_frames": len(tr),
         "metrics": {"best_epoch": best_epoch, **best_metrics}, "train_config": _jsonable(cfg),
         "versions": versions(), "created_unix": int(time.time()),
@@ -517,6 +552,36 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     wall = time.perf_counter() - t_start
     log(f"wrote {out} (best epoch {best_epoch}) in {wall / 60:.1f} min")
     return TrainResult(checkpoint=out, metrics=best_metrics, epochs=epoch, wall_s=wall)
+
+
+DETECT_SCORE_PX = 5.0  # stage 2 validation score: 1 - AUROC of the detector costs like this many px of error
+
+
+def _check_same_env(env: dict, other: dict, path: str, data: str) -> None:
+    """Online data must come from the same robot, camera and timing as the demonstrations."""
+    for key in ("robot", "camera", "width", "height", "plan_dt"):
+        if env.get(key) != other.get(key):
+            raise ConfigError(f"online data {path!r} has {key} = {other.get(key)!r}, the demonstrations {data!r} "
+                              f"have {env.get(key)!r}")
+    for key in ("K", "T_world_cam"):
+        if not np.allclose(env[key], other[key], atol=1e-9):
+            raise ConfigError(f"online data {path!r}: camera {key} differs from the demonstrations {data!r}")
+
+
+def _load_init(model, path: str, vocab, log) -> None:
+    """Copy a checkpoint's weights into ``model`` (fine-tuning); refuses another shape or vocabulary."""
+    from tcot_hybrid.learning.checkpoint import load_checkpoint
+
+    ck = load_checkpoint(path, kind=model.cfg.kind)
+    if tuple(ck.meta["vocabulary"]) != tuple(vocab.tokens):
+        raise ConfigError(f"init checkpoint {path!r} has vocabulary {ck.meta['vocabulary']}, the data gives "
+                          f"{list(vocab.tokens)}")
+    mine = dataclasses.replace(model.cfg, readout_radius_cells=0)
+    theirs = dataclasses.replace(ck.model.cfg, readout_radius_cells=0)
+    if mine != theirs:
+        raise ConfigError(f"init checkpoint {path!r} has model {theirs}, this run builds {mine}")
+    model.load_state_dict(ck.model.state_dict())
+    log(f"initialised from {path}")
 
 
 _PROBE_STEPS = 6  # per thread count, at the start of every epoch (the first step of each is not timed)
