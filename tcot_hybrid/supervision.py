@@ -4,7 +4,8 @@ replan locally — the paper's Algorithm 1 (GLSR) as an explicit state machine, 
 Modes
 - ``global``: one global plan at the first step, followed frozen (paper: global trajectory only).
 - ``local``: a local plan every ``t_l`` steps from the first step (paper: local trajectory only).
-- ``glsr``: Algorithm 1. Global plan at the first step, followed frozen until ``t_f``; from then on
+- ``glsr``: Algorithm 1. Global plan at the first step, followed frozen until ``t_f`` (or until the executor
+  has carried it out, if that comes first: a finished plan has nothing left to follow); from then on
   failure detection every step; when ``t mod t_l == 0`` and the task is not judged successful, a local
   plan from the current image, which the motion stack retargets to smoothly.
 - ``glsr_reset``: the paper's released-code variant: on the first detected failure after ``t_f`` the
@@ -27,8 +28,10 @@ class SupervisorConfig:
     """GLSR parameters (steps are planner steps of plan_dt).
 
     mode:              global | local | glsr | glsr_reset (see module doc).
-    t_f:               steps the global plan is followed frozen before failure detection starts. Up:
-                       fewer needless replans on slow tasks; down: earlier recovery.
+    t_f:               latest step at which the frozen global phase ends and failure detection starts; it
+                       ends earlier when the executor has carried the whole global plan out. Up: fewer
+                       needless replans of a slow but working plan; down: earlier recovery from a plan that
+                       is still running but already wrong (e.g. the object moved under it).
     t_l:               local planning period [steps]. Down: reacts faster, more planner calls.
     success_threshold: p(success) at or above which the task is judged done (no replan). Up: replans
                        more readily (fewer missed failures, more false alarms).
@@ -40,7 +43,7 @@ class SupervisorConfig:
     """
 
     mode: str = "global"
-    t_f: int = 60
+    t_f: int = 100
     t_l: int = 8
     success_threshold: float = 0.5
     geometric_checks: bool = False
@@ -103,7 +106,8 @@ class Supervisor:
                 return self._plan(step, "local", "period", executor)
             return Decision(None, False, None)
         geometric = self._geometric_reason(executor) if cfg.geometric_checks else None
-        if step <= cfg.t_f and geometric is None:
+        frozen = self.state == "global_follow" and step <= cfg.t_f and not executor.plan_finished
+        if frozen and geometric is None:
             return Decision(None, False, None)
         p, rejected = self._detect(observe)
         successful = (not rejected) and p >= cfg.success_threshold

@@ -43,6 +43,25 @@ def test_algorithm1_global_then_frozen_then_local_every_t_l_when_not_successful(
     assert all(d.event and d.event["p_success"] == 0.1 for d in ds[11:])
 
 
+def test_frozen_phase_ends_when_the_global_plan_has_been_carried_out():
+    class DoneAfter5(FakeExecutor):
+        def __init__(self):
+            self.t = 0
+
+        @property
+        def plan_finished(self):
+            return self.t > 5
+
+    sup, ex = Supervisor(SupervisorConfig(mode="glsr", t_f=50, t_l=4), FakePlanner(0.1)), DoneAfter5()
+    ds = []
+    for t in range(14):
+        ex.t = t
+        ds.append(sup.decide(t, observe=lambda: None, executor=ex))
+    assert all(d.event is None for d in ds[1:6])  # still following the frozen plan
+    assert ds[6].event["state"] == "detect" and ds[6].event["p_success"] == 0.1  # detection from here
+    assert [t for t, d in enumerate(ds) if d.plan_mode] == [0, 8, 12]
+
+
 def test_no_replan_while_judged_successful():
     ds = decisions(SupervisorConfig(mode="glsr", t_f=3, t_l=2), 0.9, 12)
     assert [t for t, d in enumerate(ds) if d.plan_mode] == [0]
