@@ -24,6 +24,7 @@ from tcot_hybrid.executor import ExecutorConfig
 from tcot_hybrid.ik import IKConfig
 from tcot_hybrid.lift import LiftConfig
 from tcot_hybrid.perturbations import PerturbConfig
+from tcot_hybrid.planners.learned import LearnedPlannerConfig
 from tcot_hybrid.planners.oracle import OracleConfig
 from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.smoothing import SmoothingConfig
@@ -53,6 +54,7 @@ class RunConfig:
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
     lift: LiftConfig = field(default_factory=LiftConfig)
     oracle: OracleConfig = field(default_factory=OracleConfig)
+    learned: LearnedPlannerConfig = field(default_factory=LearnedPlannerConfig)
     supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
     perturb: PerturbConfig = field(default_factory=PerturbConfig)
 

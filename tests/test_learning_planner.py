@@ -17,7 +17,13 @@ from tcot_hybrid.learning.model import ModelConfig, PlannerNet  # noqa: E402
 from tcot_hybrid.learning.vocab import Vocabulary, words  # noqa: E402
 from tcot_hybrid.planners import Observation, PlannerContext, list_planners, make_planner  # noqa: E402
 from tcot_hybrid.planners.direct import DirectPlanner, TcpKinematics  # noqa: E402
-from tcot_hybrid.planners.learned import LearnedPlanner, check_outputs  # noqa: E402
+from tcot_hybrid.planners.learned import (  # noqa: E402
+    LearnedPlanner,
+    LearnedPlannerConfig,
+    align_gripper_switches,
+    check_outputs,
+)
+from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.robot import load_robot_spec  # noqa: E402
 
 INSTR = "put the cube on the plate"
@@ -221,3 +227,31 @@ def test_inference_shape_and_latency_smoke(planner):
         t.append(time.perf_counter() - t0)
     assert out["uv_px"].shape == (60, 2) and out["z_m"].shape == (60,) and out["grip_logit"].shape == (60,)
     print(f"batch-1 inference (test model, width 8): median {1e3 * np.median(t):.2f} ms")
+
+
+def test_gripper_switch_moves_to_the_bottom_of_its_descent():
+    # measured shape (stack task, seed 2001): the close predicted one waypoint after the lowest point
+    z = np.array([.34, .10, .015, .035, .20, .13, .07, .072, .18, .10, .016, .021, .086, .17, .13])
+    g = np.array([0, 0, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 1, 1, 1], bool)
+    out = align_gripper_switches(z, g, window=2, min_rise_m=0.015)
+    assert np.flatnonzero(np.diff(out.astype(int))).tolist() == [1, 6, 9]  # close at 2, open at 7, close at 10
+    assert out[10] and not out[9] and out[2] and not out[7]
+    assert np.array_equal(align_gripper_switches(z, g, window=0, min_rise_m=0.015), g)  # 0 = off
+
+
+def test_gripper_switch_kept_on_flat_segments_and_never_crosses_another_switch():
+    z = np.array([.05, .05, .051, .049, .05, .05])  # a horizontal pull (drawer): nothing to move
+    g = np.array([0, 1, 1, 1, 0, 0], bool)
+    assert np.array_equal(align_gripper_switches(z, g, window=2, min_rise_m=0.015), g)
+    z = np.array([.3, .02, .2, .2, .01, .3])
+    g = np.array([0, 0, 1, 0, 0, 1], bool)  # switches at 2, 3, 5: each moves only inside its own span
+    out = align_gripper_switches(z, g, window=3, min_rise_m=0.015)
+    assert np.flatnonzero(np.diff(out.astype(int))).size == 3
+    assert out[1] and not out[0]
+
+
+def test_learned_planner_config_validated():
+    with pytest.raises(ConfigError, match="switch_window"):
+        LearnedPlannerConfig(switch_window=-1)
+    with pytest.raises(ConfigError, match="switch_min_rise_m"):
+        LearnedPlannerConfig(switch_min_rise_m=-0.1)

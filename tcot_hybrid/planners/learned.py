@@ -15,6 +15,7 @@ raise :class:`PlanningError` (nothing is clipped or guessed).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,52 @@ from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.planners.base import MODES, Observation, Planner
 
 BLANK_STD = 1.0  # an image whose pixel values vary less than this (0-255 scale) shows nothing
+
+
+@dataclass(frozen=True, kw_only=True)
+class LearnedPlannerConfig:
+    """How the network's waypoints become a plan.
+
+    switch_window:    gripper switches are moved to the lowest waypoint within this many waypoints of where
+                      the gripper head put them (0 = off). The height and gripper heads are separate, and a far
+                      future switch predicted one waypoint late closes the fingers half-way up after the
+                      descent; in every demonstration grasps and releases happen at the bottom of a descent.
+                      Up: corrects larger timing slips, but may pull a switch into a neighbouring descent.
+    switch_min_rise_m: move a switch only when its waypoint is this much higher than that lowest one [m]
+                      (horizontal pulls, e.g. a drawer, keep their switch). Down: moves more switches.
+    """
+
+    switch_window: int = 2
+    switch_min_rise_m: float = 0.015
+
+    def __post_init__(self) -> None:
+        from tcot_hybrid.config import require_int, require_nonnegative
+
+        require_int("learned.switch_window", self.switch_window, minimum=0)
+        require_nonnegative("learned.switch_min_rise_m", self.switch_min_rise_m)
+
+
+def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, min_rise_m: float) -> np.ndarray:
+    """Gripper bits with every switch moved to the lowest waypoint within ``window`` of it, when the switch's
+    own waypoint is more than ``min_rise_m`` higher (see :class:`LearnedPlannerConfig`). Pure function."""
+    z, out = np.asarray(z_m, float), np.asarray(closed, bool).copy()
+    if window <= 0:
+        return out
+    flips = np.flatnonzero(out[1:] != out[:-1]) + 1
+    prev = 0  # where the previous switch ended up: a switch never moves onto or across its neighbours
+    for k, i in enumerate(flips):
+        lo = max(i - window, prev + 1)
+        hi = min(i + window, (flips[k + 1] - 1) if k + 1 < len(flips) else len(z) - 1)
+        j = lo + int(np.argmin(z[lo:hi + 1]))
+        if j != i and z[i] - z[j] > min_rise_m:
+            new, old = out[i], out[i - 1]
+            if j < i:
+                out[j:i] = new
+            else:
+                out[i:j] = old
+            i = j
+        prev = i
+    return out
 
 
 def check_image(image, camera: CameraModel) -> np.ndarray:
@@ -125,10 +172,11 @@ class LearnedPlanner(NetworkPlanner):
     needs_image = True
     kind = "trajectory"
 
-    def __init__(self, checkpoint, camera: CameraModel):
+    def __init__(self, checkpoint, camera: CameraModel, *, config: LearnedPlannerConfig = LearnedPlannerConfig()):
         super().__init__(checkpoint, camera)
         from tcot_hybrid.data.labels import TrajectoryWindowConfig
 
+        self.config = config
         w = self.meta["windows"]
         self.windows = TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")})
         if self.windows.L_g != self.cfg.n_global or self.windows.L_l + 1 != self.cfg.n_local:
@@ -141,7 +189,7 @@ class LearnedPlanner(NetworkPlanner):
 
         path = ctx.options.get("checkpoint") or default_checkpoint(ctx.robot_name, cls.kind)
         ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
-        return cls(ck, ctx.camera)
+        return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
 
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         if mode not in MODES:
@@ -157,7 +205,9 @@ class LearnedPlanner(NetworkPlanner):
             depth = depth_at_height(self.camera, uv, z)
         except LiftError as exc:
             raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
-        return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=prob > 0.5, camera=self.camera.name, kind=mode,
+        closed = align_gripper_switches(z, prob > 0.5, window=self.config.switch_window,
+                                        min_rise_m=self.config.switch_min_rise_m)
+        return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=closed, camera=self.camera.name, kind=mode,
                             step=obs.step, meta={"z_m": z, "gripper_prob": prob})
 
     def success_probability(self, obs: Observation) -> float:
