@@ -152,24 +152,42 @@ def render_ms(cfg: RunConfig, n: int) -> float:
 
 
 def planner_inference_ms(cfg: RunConfig, n: int) -> dict[str, dict]:
-    """Batch-1 latency of the learned planner per mode (shipped checkpoint), 1 torch thread."""
+    """Batch-1 latency of the learned planner per mode (shipped checkpoint, image to plan) with 2 torch
+    threads (``planner_inference_ms``) and with 1 (``..._1thread``, what each eval worker uses)."""
     import torch
 
-    torch.set_num_threads(1)
     r = _runner(dataclasses.replace(cfg, planner="learned"))
     planner, obs = r.stack.planner, r.observe(0)
     out = {}
-    for label, call in (("global", lambda: planner.plan(obs, mode="global")),
-                        ("local", lambda: planner.plan(obs, mode="local")),
-                        ("detect", lambda: planner.success_probability(obs))):
-        call()
-        times = []
-        for _ in range(n):
-            t = time.perf_counter()
+    before = torch.get_num_threads()
+    for threads, suffix in ((2, ""), (1, "_1thread")):
+        torch.set_num_threads(threads)
+        for label, call in (("global", lambda: planner.plan(obs, mode="global")),
+                            ("local", lambda: planner.plan(obs, mode="local")),
+                            ("detect", lambda: planner.success_probability(obs))):
             call()
-            times.append((time.perf_counter() - t) * 1e3)
-        out[f"planner_inference_ms/{label}"] = _stat(times, "ms")
+            times = []
+            for _ in range(n):
+                t = time.perf_counter()
+                call()
+                times.append((time.perf_counter() - t) * 1e3)
+            out[f"planner_inference_ms{suffix}/{label}"] = _stat(times, "ms")
+    torch.set_num_threads(before)
     return out
+
+
+def eval_wall_s(workers: int, *, seeds: int, robot: str) -> float:
+    """Wall time of ``tcot eval`` (learned planner, every task, ``seeds`` seeds) with ``workers`` processes [s]."""
+    from tcot_hybrid.evaluation import evaluate, make_jobs
+    from tcot_hybrid.tasks import list_tasks
+
+    jobs = make_jobs(RunConfig(planner="learned", robot=robot), tasks=[t.name for t in list_tasks()],
+                     planners=["learned"], modes=["global"], robots=[robot], controllers=["computed_torque"], iks=["mink"],
+                     episodes=seeds, seed_start=1000)
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        evaluate(jobs, tmp, workers=workers, progress=False)
+        return time.perf_counter() - t
 
 
 def peak_rss_mb_of(argv: list[str]) -> float:
@@ -240,6 +258,11 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
         figures.update(planner_inference_ms(base, 20 if quick else 200))
     except TcotError as exc:  # no shipped checkpoint for this robot: say so instead of a number
         result_notes.append(f"planner inference not measured: {exc}")
+    if not quick and "planner_inference_ms/global" in figures:
+        walls = {w: eval_wall_s(w, seeds=4, robot=robot) for w in (1, 2)}
+        for w, wall in walls.items():
+            figures[f"eval_wall_s/workers_{w}"] = _stat([wall], "s")
+        ratios["eval_speedup_2_over_1_workers"] = round(walls[1] / walls[2], 2)
     default_data = Path("data") / f"demos_{robot}.hdf5"
     if not quick and default_data.exists():
         with tempfile.TemporaryDirectory() as tmp:  # the data load dominates; half a minute of training
