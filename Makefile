@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench planner clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -21,6 +21,22 @@ demo: setup
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+# The shipped planner, from nothing (docs/planner.md, "Training pipeline"): demonstrations, stage 1,
+# online rollouts and oracle recoveries under perturbations, stage 2 (trajectories + failure detection).
+PERTURBS := object_moved,target_moved,object_drop,offcenter_grasp,arm_push,camera_noise
+STAGE1_FLAGS ?= --max-epochs 16 --stage1-epochs 8 --max-minutes 40
+planner: setup
+	$(BIN)/tcot collect --episodes-per-task 50 --seed-start 0 --out data/demos_panda.hdf5
+	$(BIN)/tcot train --out runs/train/stage1.safetensors $(STAGE1_FLAGS)
+	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage1.safetensors --mode global \
+		--perturb none,$(PERTURBS) --episodes-per-task 10 --seed-start 200 --out data/online_learned_global.hdf5
+	$(BIN)/tcot collect --mode local --perturb $(PERTURBS) --episodes-per-task 10 --seed-start 100 \
+		--out data/online_oracle_local.hdf5
+	$(BIN)/tcot collect --mode glsr --perturb $(PERTURBS) --episodes-per-task 10 --seed-start 110 \
+		--out data/online_oracle_glsr.hdf5
+	$(BIN)/tcot train --config examples/configs/train_stage2.yaml
+	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
 clean:
 	rm -rf runs .pytest_cache

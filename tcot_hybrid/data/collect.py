@@ -26,7 +26,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from tcot_hybrid.data.dataset import (  # noqa: E402
-    DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, VALID_EVERY, DemoFile, image_key, is_valid_seed,
+    DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, VALID_EVERY, DemoFile, env_difference, image_key, is_valid_seed,
 )
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 
@@ -237,13 +237,11 @@ def _check_env(path: Path, h5, env_args: dict) -> None:
         data.attrs["env_args"] = json.dumps(env_args)
         return
     have = json.loads(data.attrs["env_args"])
-    for key in ("robot", "camera", "width", "height", "sim_dt", "ctrl_dt", "plan_dt", "config_hash"):
-        if have.get(key) != env_args.get(key):
-            raise DatasetError(f"demo file {path} was collected with {key} = {have.get(key)!r}, this run has "
-                               f"{env_args.get(key)!r}; use another --out or the same settings")
-    for key in ("K", "T_world_cam"):
-        if not np.allclose(have[key], env_args[key], atol=1e-9):
-            raise DatasetError(f"demo file {path}: camera {key} differs from the file's; use another --out")
+    diff = env_difference(have, env_args, ("robot", "camera", "width", "height", "sim_dt", "ctrl_dt", "plan_dt",
+                                           "config_hash"))
+    if diff:
+        raise DatasetError(f"demo file {path} was collected with {diff} (this run); use another --out or the "
+                           f"same settings")
 
 
 def _precheck_env(path: Path, h5, cfg) -> None:

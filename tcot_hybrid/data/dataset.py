@@ -53,6 +53,21 @@ DEMO_ATTRS: dict[str, type] = {
 SOURCES = ("demo", "rollout")
 
 
+CAMERA_KEYS = ("K", "T_world_cam")
+
+
+def env_difference(have: dict, want: dict, keys: tuple[str, ...]) -> str | None:
+    """The first way two env_args differ in ``keys`` or the camera (``K``, ``T_world_cam``), as text
+    (``"robot = 'panda', not 'ur5e'"``), or None when they agree."""
+    for key in keys:
+        if have.get(key) != want.get(key):
+            return f"{key} = {have.get(key)!r}, not {want.get(key)!r}"
+    for key in CAMERA_KEYS:
+        if not np.allclose(have[key], want[key], atol=1e-9):
+            return f"camera {key} differs"
+    return None
+
+
 def image_key(camera: str) -> str:
     """Name of the image dataset inside ``obs/`` for planner camera ``camera``."""
     return f"{camera}_image"

@@ -559,13 +559,11 @@ DETECT_SCORE_PX = 5.0  # stage 2 validation score: 1 - AUROC of the detector cos
 
 def _check_same_env(env: dict, other: dict, path: str, data: str) -> None:
     """Online data must come from the same robot, camera and timing as the demonstrations."""
-    for key in ("robot", "camera", "width", "height", "plan_dt"):
-        if env.get(key) != other.get(key):
-            raise ConfigError(f"online data {path!r} has {key} = {other.get(key)!r}, the demonstrations {data!r} "
-                              f"have {env.get(key)!r}")
-    for key in ("K", "T_world_cam"):
-        if not np.allclose(env[key], other[key], atol=1e-9):
-            raise ConfigError(f"online data {path!r}: camera {key} differs from the demonstrations {data!r}")
+    from tcot_hybrid.data.dataset import env_difference
+
+    diff = env_difference(other, env, ("robot", "camera", "width", "height", "plan_dt"))
+    if diff:
+        raise ConfigError(f"online data {path!r} has {diff} (the demonstrations {data!r})")
 
 
 def _load_init(model, path: str, vocab, log) -> None:
