@@ -169,15 +169,15 @@ def test_online_frames_detect_everywhere_imitate_only_recoveries(online_file, de
 
     vocab = Vocabulary.build(instructions_of(demo_file))
     kw = dict(windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
-    on = load_online_frames(online_file, "train", vocab, detect_stride=3, **kw)
+    on = load_online_frames(online_file, "train", vocab, frame_stride=3, **kw)
     seeds = {20, 30}  # validation seeds (seed % 10 == 0) stay out of the train split
     assert len(on.demos) == 12 - len(seeds)
     rollout = np.isin(on.demo, [i for i, n in enumerate(on.demos) if i < 5])  # demos of seeds 21-25
     assert not on.traj[rollout].any() and not on.success[torch.from_numpy(rollout)].any()
-    assert set(on.t[rollout]) == set(range(0, 24, 3))  # every 3rd frame kept for detection
+    assert set(on.t[rollout]) == set(range(0, 24, 3))  # every 3rd frame kept
     rec = ~rollout
-    assert on.traj[rec].any() and on.t[rec & on.traj].min() == 8  # imitated from the recovery on
-    assert (on.t[rec & ~on.traj] % 3 == 0).all()
+    assert on.traj[rec].any() and on.t[rec & on.traj].min() == 9  # imitated from the recovery (step 8) on
+    assert set(on.t[rec & ~on.traj]) == {0, 3, 6}
     assert set(on.t[rec & (on.success.numpy() > 0.5)]) == {21, 22, 23}  # success frames always kept
     demos = load_frames(demo_file, "train", vocab, **kw)
     both = concat_frames([demos, on])

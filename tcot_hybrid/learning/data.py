@@ -90,9 +90,9 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
-                       max_tokens: int, direct_horizon: int, detect_stride: int = 1) -> FrameSet:
-    """Online episodes of ``path`` (split by seed like the demos, failed episodes included): every
-    ``detect_stride``-th frame plus every success frame for failure detection; the frames of successful
+                       max_tokens: int, direct_horizon: int, frame_stride: int = 1) -> FrameSet:
+    """Online episodes of ``path`` (split by seed like the demos, failed episodes included), every
+    ``frame_stride``-th frame plus every success frame: all for failure detection; those of successful
     oracle episodes from their first plan after the perturbation on (``recover_step``) also carry trajectory
     labels (recovery demonstrations)."""
     from tcot_hybrid.data.dataset import is_valid_seed
@@ -112,8 +112,8 @@ def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windo
                 traj[:] = True
             elif info.source == "demo" and info.success and info.recover_step >= 0:
                 traj = t >= info.recover_step  # before it the track still follows the stale plan
-            detect = (t % detect_stride == 0) | ((t >= info.t_success) & (info.t_success >= 0))
-            return traj | detect, traj
+            rows = (t % frame_stride == 0) | ((t >= info.t_success) & (info.t_success >= 0))
+            return rows, traj
 
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
                             keep=keep)

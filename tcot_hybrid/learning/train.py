@@ -83,8 +83,8 @@ class TrainConfig:
                      recoveries under ``--perturb``): failure-detection frames from every episode, labelled by
                      the success predicate (paper eq. 7), and recovery trajectories from successful oracle
                      episodes after their perturbation [paths]
-    online_detect_stride: keep every k-th frame of an online episode for detection (neighbouring frames are
-                     nearly identical; success frames are always kept). Up: less memory, fewer negatives.
+    online_frame_stride: keep every k-th frame of an online episode (neighbouring frames are nearly
+                     identical; success frames are always kept). Up: less memory and load time, less data.
     init:            start from this checkpoint's weights (same data vocabulary and model shape), e.g. stage 2
                      on online rollouts after a stage-1 run [path]; None = random init.
     out:             checkpoint to write (``.safetensors``; ``.json`` metadata and ``.metrics.jsonl`` next to it)
@@ -118,7 +118,7 @@ class TrainConfig:
 
     data: str = "data/demos_panda.hdf5"
     online_data: tuple[str, ...] = ()
-    online_detect_stride: int = 2
+    online_frame_stride: int = 2
     init: str | None = None
     out: str = "runs/train/planner.safetensors"
     kind: str = "trajectory"
@@ -149,7 +149,7 @@ class TrainConfig:
         require_choice("kind", self.kind, ("trajectory", "direct"))
         for name in ("seed",):
             require_int(name, getattr(self, name), minimum=0)
-        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_detect_stride"):
+        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride"):
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
         if self.epoch_samples is not None:
@@ -445,14 +445,18 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
     data_files = [cfg.data, *cfg.online_data]
+    trs, vas = [tr], [va]
     for path in cfg.online_data:
         _check_same_env(env, env_of(path)[0], path, cfg.data)
-        on_tr, on_va = (load_online_frames(path, split, vocab, detect_stride=cfg.online_detect_stride, **load)
+        on_tr, on_va = (load_online_frames(path, split, vocab, frame_stride=cfg.online_frame_stride, **load)
                         for split in ("train", "valid"))
         log(f"online data {path}: {len(on_tr.demos)} train episodes / {len(on_tr)} frames "
             f"({int(on_tr.traj.sum())} with recovery trajectories, {int(on_tr.success.sum())} success), "
             f"{len(on_va.demos)} valid episodes / {len(on_va)} frames")
-        tr, va = concat_frames([tr, on_tr]), concat_frames([va, on_va])
+        trs.append(on_tr)
+        vas.append(on_va)
+    tr, va = concat_frames(trs), concat_frames(vas)
+    del trs, vas
     model = PlannerNet(mcfg)
     if cfg.init is not None:
         _load_init(model, cfg.init, vocab, log)
