@@ -152,6 +152,7 @@ class TrainConfig:
         for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride"):
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
+        object.__setattr__(self, "online_data", tuple(str(p) for p in self.online_data))  # YAML gives a list
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
         if not 0 <= self.global_t0_frac <= 1:
