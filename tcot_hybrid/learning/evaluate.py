@@ -264,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--split", default="valid", choices=["train", "valid", "all"])
     p.add_argument("--out", default="docs/planner-eval")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--readme", type=Path, default=None,
+                   help="also write the report into this Markdown file's <!-- planner_eval:start/end --> "
+                        "(direct checkpoints: direct_eval) section")
     args = p.parse_args(argv)
     import torch
 
@@ -271,6 +274,10 @@ def main(argv: list[str] | None = None) -> int:
     cmdline = "python -m tcot_hybrid.learning.evaluate " + " ".join(sys.argv[1:] if argv is None else argv)
     r = run(args.checkpoint, args.data, split=args.split, out=args.out, command=cmdline)
     print(markdown(r))
+    if args.readme:
+        from tcot_hybrid.bench import update_readme_section
+
+        update_readme_section(args.readme, "direct_eval" if r["kind"] == "direct" else "planner_eval", markdown(r))
     return 0
 
 
