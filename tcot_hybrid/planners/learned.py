@@ -132,7 +132,8 @@ class NetworkPlanner(Planner):
 
         self.torch = torch
         self.checkpoint = checkpoint
-        self.model = checkpoint.model.eval()
+        # the image arrives HWC, i.e. channels_last once viewed as NCHW: keep the weights in that layout too
+        self.model = checkpoint.model.eval().to(memory_format=torch.channels_last)
         self.meta = checkpoint.meta
         self.cfg = self.model.cfg
         self.camera = camera
