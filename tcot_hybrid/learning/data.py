@@ -49,6 +49,7 @@ class FrameSet:
     l_xyz: torch.Tensor
     success: torch.Tensor  # (N,) float 0/1
     traj: np.ndarray  # (N,) bool: trajectory labels are imitated (else a failure-detection frame only)
+    online: np.ndarray  # (N,) bool: from an online file (rollout or perturbed recovery), not a demonstration
     d_delta: torch.Tensor  # (N, 3) [m] TCP displacement over direct_horizon steps
     d_grip: torch.Tensor  # (N,) float 0/1 gripper command direct_horizon steps ahead
     demo: np.ndarray  # (N,) demo index into ``demos``
@@ -86,7 +87,7 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
         if not names:
             raise DatasetError(f"demo file {path}: split {split!r} has no usable demos")
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
-                            keep=lambda info, T: (np.ones(T, bool), np.ones(T, bool)))
+                            keep=lambda info, T: (np.ones(T, bool), np.ones(T, bool)), online=False)
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
@@ -116,11 +117,11 @@ def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windo
             return rows, traj
 
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
-                            keep=keep)
+                            keep=keep, online=True)
 
 
 def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryWindowConfig, max_tokens: int,
-                 direct_horizon: int, keep) -> FrameSet:
+                 direct_horizon: int, keep, online: bool) -> FrameSet:
     """Frames of demos ``names`` of open file ``f``; ``keep(info, T) -> (rows kept, rows with trajectory
     labels)`` as boolean masks over the demo's samples (labels always come from the whole track)."""
     cols: dict[str, list] = {k: [] for k in ("img", "tok", "prop", "g", "l", "gx", "lx", "succ", "dd", "dg",
@@ -162,7 +163,8 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         images=cat("img"), tokens=cat("tok"), proprio=cat("prop"),
         g_uv=cat("g", 0).float(), g_z=cat("g", 1).float(), g_grip=cat("g", 2), g_xyz=cat("gx"),
         l_uv=cat("l", 0).float(), l_z=cat("l", 1).float(), l_grip=cat("l", 2), l_xyz=cat("lx"),
-        success=cat("succ"), traj=np.concatenate(cols["traj"]), d_delta=cat("dd"), d_grip=cat("dg"),
+        success=cat("succ"), traj=np.concatenate(cols["traj"]), online=np.full(sum(map(len, cols["t"])), online),
+        d_delta=cat("dd"), d_grip=cat("dg"),
         demo=np.concatenate(cols["demo"]), t=np.concatenate(cols["t"]), demos=names, tasks=tasks,
         instructions=instrs)
 

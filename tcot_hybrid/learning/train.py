@@ -105,6 +105,10 @@ class TrainConfig:
     patience:        stop after this many epochs without a better validation score.
     stage1_epochs:   epochs of stage 1 (trajectory only) before detection joins (trajectory kind only).
     mix_stage1/2:    batch composition per stage.
+    recovery_frac:   fraction of local-prompt samples drawn from the recovery frames of ``online_data`` (when
+                     there are any). Recovery states (e.g. the arm above an empty bowl after a drop) are a
+                     small share of all frames and look like the end of a demonstration, where the local
+                     label is "stay": up makes the local prompt recover, down keeps it closer to the demos.
     direct_horizon:  direct kind: predict the TCP displacement over this many planner steps.
     max_train_demos: use only the first N training demos (quick experiments, tests); None = all.
     val_max_frames:  validation frames per epoch (every k-th frame; all t = 0 frames kept). Down: faster epochs.
@@ -135,6 +139,7 @@ class TrainConfig:
     global_t0_frac: float = 0.25
     mix_stage1: MixConfig = field(default_factory=MixConfig)
     mix_stage2: MixConfig = field(default_factory=lambda: MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
+    recovery_frac: float = 0.5
     direct_horizon: int = 3
     max_train_demos: int | None = None
     val_max_frames: int = 2000
@@ -155,8 +160,9 @@ class TrainConfig:
         object.__setattr__(self, "online_data", tuple(str(p) for p in self.online_data))  # YAML gives a list
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
-        if not 0 <= self.global_t0_frac <= 1:
-            raise ConfigError(f"global_t0_frac must be in [0, 1], got {self.global_t0_frac}")
+        for name in ("global_t0_frac", "recovery_frac"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ConfigError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         require_int("stage1_epochs", self.stage1_epochs, minimum=0)
         for name in ("lr", "max_minutes"):
             require_positive(name, getattr(self, name))
@@ -185,6 +191,7 @@ class Batcher:
         self.pos_idx, self.neg_idx = np.flatnonzero(succ), np.flatnonzero(~succ)
         self.traj_idx = np.flatnonzero(frames.traj)  # global / local samples imitate these frames only
         self.t0_idx = np.flatnonzero((frames.t == 0) & frames.traj)
+        self.recovery_idx = np.flatnonzero(frames.traj & frames.online)
 
     def indices(self, n: int, mix: MixConfig) -> tuple[np.ndarray, np.ndarray]:
         rng = self.rng
@@ -194,6 +201,10 @@ class Batcher:
         if glob.size and self.cfg.global_t0_frac > 0 and self.cfg.kind == "trajectory":  # the frames closed-loop global plans are made from
             at0 = glob[rng.random(glob.size) < self.cfg.global_t0_frac]
             idx[at0] = rng.choice(self.t0_idx, size=at0.size)
+        loc = np.flatnonzero(modes == MODE_IDS["local"])
+        if loc.size and self.recovery_idx.size and self.cfg.recovery_frac > 0:
+            rec = loc[rng.random(loc.size) < self.cfg.recovery_frac]
+            idx[rec] = rng.choice(self.recovery_idx, size=rec.size)
         det = np.flatnonzero(modes == MODE_IDS["detect"])
         if det.size and self.pos_idx.size and self.neg_idx.size:  # detect: balanced success / not yet
             pos = rng.random(det.size) < 0.5
