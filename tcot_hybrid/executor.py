@@ -133,7 +133,11 @@ class MotionExecutor:
             self.event("ik_not_converged", waypoint=i, status=res.status, pos_err_m=round(res.pos_err, 5),
                        rot_err_rad=round(res.rot_err, 5))
         self._ik_seed = res.q
-        self.smoother.set_target(res.q)
+        try:
+            self.smoother.set_target(res.q)
+        except TrajectoryError as exc:  # e.g. retargeted while moving fast toward a joint limit
+            self.event("reference_brake", waypoint=i, reason=str(exc))
+            self.smoother.brake()  # stop inside the limits; the waypoint logic moves on from rest
 
     def _advance(self, t: float) -> None:
         if self.phase == "settle":

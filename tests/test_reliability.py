@@ -450,6 +450,29 @@ def test_row05_unreachable_waypoint_is_best_effort_and_replanned():
     assert rec["success"]
 
 
+def test_row09_retarget_ruckig_refuses_mid_episode_brakes_and_carries_on():
+    """A segment Ruckig refuses while the arm is moving (measured: a GLSR replan heading past a joint
+    limit) brakes the reference inside the limits and the episode goes on; it never crashes."""
+    from tcot_hybrid.errors import TrajectoryError
+
+    r = make_runner()
+    sm = r.stack.executor.smoother
+    real, calls = sm.set_target, {"n": 0}
+
+    def refuse_fourth(q, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise TrajectoryError("set_target: joint 5 would reach 3.76 rad, outside [q_min, q_max]")
+        return real(q, *a, **k)
+
+    sm.set_target = refuse_fourth
+    rec = r.run()
+    brakes = events(rec, "reference_brake")
+    assert len(brakes) == 1 and "joint 5" in brakes[0]["reason"] and brakes[0]["waypoint"] == 3
+    assert rec["fault"] is None and rec["max_joint_limit_violation_rad"] == 0.0
+    assert rec["success"]  # the waypoint logic moved on from rest
+
+
 # --- row 14: simulation divergence --------------------------------------------------------------------
 
 
