@@ -28,6 +28,7 @@ from tcot_hybrid.data.labels import TrajectoryWindowConfig, global_labels, local
 from tcot_hybrid.errors import DatasetError
 from tcot_hybrid.learning.vocab import Vocabulary
 
+RECOVERY_DENSE_STEPS = 10  # frames kept at stride 1 from a recovery's first plan on (the arm turns there)
 _KEYS = ("obs/robot0_joint_pos", "obs/robot0_eef_pos", "obs/robot0_gripper_closed", "obs/eef_uv_px",
          "task_success")
 
@@ -93,7 +94,8 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                        max_tokens: int, direct_horizon: int, frame_stride: int = 1) -> FrameSet:
     """Online episodes of ``path`` (split by seed like the demos, failed episodes included), every
-    ``frame_stride``-th frame plus every success frame: all for failure detection; those of successful
+    ``frame_stride``-th frame plus every success frame (and every frame of the first
+    ``RECOVERY_DENSE_STEPS`` of a recovery): all for failure detection; those of successful
     oracle episodes from their first plan after the perturbation on (``recover_step``) also carry trajectory
     labels (recovery demonstrations)."""
     from tcot_hybrid.data.dataset import is_valid_seed
@@ -114,6 +116,8 @@ def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windo
             elif info.source == "demo" and info.success and info.recover_step >= 0:
                 traj = t >= info.recover_step  # before it the track still follows the stale plan
             rows = (t % frame_stride == 0) | ((t >= info.t_success) & (info.t_success >= 0))
+            if traj.any():  # every frame where the recovery starts: the decision the local prompt must learn
+                rows |= traj & (t < info.recover_step + RECOVERY_DENSE_STEPS)
             return rows, traj
 
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
