@@ -31,7 +31,8 @@ class SupervisorConfig:
     t_f:               latest step at which the frozen global phase ends and failure detection starts; it
                        ends earlier when the executor has carried the whole global plan out. Up: fewer
                        needless replans of a slow but working plan; down: earlier recovery from a plan that
-                       is still running but already wrong (e.g. the object moved under it).
+                       is still running but already wrong (e.g. the object moved under it). Default 16
+                       (1.6 s) by measurement: docs/glsr.md, "Choosing t_f".
     t_l:               local planning period [steps]. Down: reacts faster, more planner calls.
     success_threshold: p(success) at or above which the task is judged done (no replan). Up: replans
                        more readily (fewer missed failures, more false alarms).
@@ -43,7 +44,7 @@ class SupervisorConfig:
     """
 
     mode: str = "global"
-    t_f: int = 100
+    t_f: int = 16
     t_l: int = 8
     success_threshold: float = 0.5
     geometric_checks: bool = False
