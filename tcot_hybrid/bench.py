@@ -177,17 +177,26 @@ def planner_inference_ms(cfg: RunConfig, n: int) -> dict[str, dict]:
 
 
 def eval_wall_s(workers: int, *, seeds: int, robot: str) -> float:
-    """Wall time of ``tcot eval`` (learned planner, every task, ``seeds`` seeds) with ``workers`` processes [s]."""
+    """Wall time of ``tcot eval`` with ``workers`` processes [s]: the learned planner in GLSR mode under
+    ``object_moved`` (the ablation's workload), every task, ``seeds`` seeds. One worker runs in this process
+    with one torch thread, as ``tcot eval --workers 1`` does."""
+    import torch
+
     from tcot_hybrid.evaluation import evaluate, make_jobs
     from tcot_hybrid.tasks import list_tasks
 
     jobs = make_jobs(RunConfig(planner="learned", robot=robot), tasks=[t.name for t in list_tasks()],
-                     planners=["learned"], modes=["global"], robots=[robot], controllers=["computed_torque"], iks=["mink"],
-                     episodes=seeds, seed_start=1000)
-    with tempfile.TemporaryDirectory() as tmp:
-        t = time.perf_counter()
-        evaluate(jobs, tmp, workers=workers, progress=False)
-        return time.perf_counter() - t
+                     planners=["learned"], modes=["glsr"], robots=[robot], controllers=["computed_torque"],
+                     iks=["mink"], episodes=seeds, seed_start=1000, perturbs=("object_moved",))
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            t = time.perf_counter()
+            evaluate(jobs, tmp, workers=workers, progress=False)
+            return time.perf_counter() - t
+    finally:
+        torch.set_num_threads(before)
 
 
 def peak_rss_mb_of(argv: list[str]) -> float:
@@ -259,7 +268,7 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     except TcotError as exc:  # no shipped checkpoint for this robot: say so instead of a number
         result_notes.append(f"planner inference not measured: {exc}")
     if not quick and "planner_inference_ms/global" in figures:
-        walls = {w: eval_wall_s(w, seeds=4, robot=robot) for w in (1, 2)}
+        walls = {w: eval_wall_s(w, seeds=3, robot=robot) for w in (1, 2)}
         for w, wall in walls.items():
             figures[f"eval_wall_s/workers_{w}"] = _stat([wall], "s")
         ratios["eval_speedup_2_over_1_workers"] = round(walls[1] / walls[2], 2)
