@@ -188,9 +188,9 @@ def test_online_frames_detect_everywhere_imitate_only_recoveries(online_file, de
     assert both.traj[idx[modes <= 1]].all()  # trajectories only from imitated frames
     assert (~both.traj[idx[modes == 2]]).any()  # detection also sees failed rollouts
     assert not both.online[: len(demos)].any() and both.online[len(demos):].all()
-    share = both.online[idx[modes == 1]].mean()  # recovery_frac 0.5 + their share of the rest
+    share = both.online[idx[modes == 1]].mean()  # recovery_frac 0.6 + their share of the rest
     natural = (both.traj & both.online).sum() / both.traj.sum()
-    assert abs(share - (0.5 + 0.5 * natural)) < 0.06
+    assert abs(share - (0.6 + 0.4 * natural)) < 0.06
 
 
 def test_stage2_finetune_from_checkpoint_with_online_data(demo_file, online_file, tmp_path):

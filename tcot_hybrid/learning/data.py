@@ -10,8 +10,8 @@ Images stay uint8 (T, H, W, 3); batches are converted on the fly.
 Online data (paper eq. 7, stage 2) comes from further files of the same format (``tcot collect
 --planner learned`` rollouts, ``tcot collect --perturb ...`` oracle recoveries): every episode, failed or
 not, gives failure-detection frames labelled by the simulator's success predicate; a successful oracle
-episode also gives trajectory labels from its perturbation step on (how to recover from the perturbed
-state). ``FrameSet.traj`` marks the frames whose trajectory labels are imitated.
+episode also gives trajectory labels from its first plan after the perturbation on (``recover_step``: how
+to recover from the perturbed state). ``FrameSet.traj`` marks the frames whose trajectory labels are imitated.
 """
 from __future__ import annotations
 

@@ -139,7 +139,7 @@ class TrainConfig:
     global_t0_frac: float = 0.25
     mix_stage1: MixConfig = field(default_factory=MixConfig)
     mix_stage2: MixConfig = field(default_factory=lambda: MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
-    recovery_frac: float = 0.5
+    recovery_frac: float = 0.6
     direct_horizon: int = 3
     max_train_demos: int | None = None
     val_max_frames: int = 2000
