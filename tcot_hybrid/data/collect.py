@@ -47,7 +47,7 @@ class DemoRecord:
 
 def collection_hash(cfg) -> str:
     """Hash of the run config with the per-episode fields (task, seed, perturbation) blanked: one value per
-    file. The perturbation is per episode (demo attributes ``perturb``, ``perturb_step``)."""
+    file. The perturbation is per episode (demo attributes ``perturb``, ``perturb_step``, ``recover_step``)."""
     from tcot_hybrid.perturbations import PerturbConfig
 
     return dataclasses.replace(cfg, task="*", seed=0, perturb=PerturbConfig()).digest()
@@ -288,8 +288,6 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
             perturbs: list[str] | None = None) -> CollectSummary:
     """Collect one episode per (task, seed, perturbation) not yet in ``out`` (resumable). ``perturbs``
     defaults to the base config's perturbation. Returns a summary."""
-    from tcot_hybrid.perturbations import PerturbConfig
-
     from tqdm import tqdm
 
     path = Path(out)
@@ -312,8 +310,7 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         # seed-major: an interruption leaves tasks and perturbations balanced
         pairs = [(t, s, p) for s in seeds for p in perturbs for t in tasks]
         todo = [key for key in pairs if key not in done]
-        cfgs = [dataclasses.replace(base_cfg, task=t, seed=s,
-                                    perturb=PerturbConfig(**{**dataclasses.asdict(base_cfg.perturb), "name": p}))
+        cfgs = [dataclasses.replace(base_cfg, task=t, seed=s, perturb=dataclasses.replace(base_cfg.perturb, name=p))
                 for (t, s, p) in todo]
         pool = None
         try:
