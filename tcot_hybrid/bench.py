@@ -8,6 +8,7 @@ of the same number of bare ``mj_step`` calls on the same task scene.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -151,28 +152,37 @@ def render_ms(cfg: RunConfig, n: int) -> float:
     return (time.perf_counter() - t) / n * 1e3
 
 
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """Run the block with ``n`` torch compute threads, then restore the previous count."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
 def planner_inference_ms(cfg: RunConfig, n: int) -> dict[str, dict]:
     """Batch-1 latency of the learned planner per mode (shipped checkpoint, image to plan) with 2 torch
     threads (``planner_inference_ms``) and with 1 (``..._1thread``, what each eval worker uses)."""
-    import torch
-
     r = _runner(dataclasses.replace(cfg, planner="learned"))
     planner, obs = r.stack.planner, r.observe(0)
     out = {}
-    before = torch.get_num_threads()
     for threads, suffix in ((2, ""), (1, "_1thread")):
-        torch.set_num_threads(threads)
         for label, call in (("global", lambda: planner.plan(obs, mode="global")),
                             ("local", lambda: planner.plan(obs, mode="local")),
                             ("detect", lambda: planner.success_probability(obs))):
-            call()
-            times = []
-            for _ in range(n):
-                t = time.perf_counter()
+            with torch_threads(threads):
                 call()
-                times.append((time.perf_counter() - t) * 1e3)
+                times = []
+                for _ in range(n):
+                    t = time.perf_counter()
+                    call()
+                    times.append((time.perf_counter() - t) * 1e3)
             out[f"planner_inference_ms{suffix}/{label}"] = _stat(times, "ms")
-    torch.set_num_threads(before)
     return out
 
 
@@ -180,23 +190,16 @@ def eval_wall_s(workers: int, *, seeds: int, robot: str) -> float:
     """Wall time of ``tcot eval`` with ``workers`` processes [s]: the learned planner in GLSR mode under
     ``object_moved`` (the ablation's workload), every task, ``seeds`` seeds. One worker runs in this process
     with one torch thread, as ``tcot eval --workers 1`` does."""
-    import torch
-
     from tcot_hybrid.evaluation import evaluate, make_jobs
     from tcot_hybrid.tasks import list_tasks
 
     jobs = make_jobs(RunConfig(planner="learned", robot=robot), tasks=[t.name for t in list_tasks()],
                      planners=["learned"], modes=["glsr"], robots=[robot], controllers=["computed_torque"],
                      iks=["mink"], episodes=seeds, seed_start=1000, perturbs=("object_moved",))
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            t = time.perf_counter()
-            evaluate(jobs, tmp, workers=workers, progress=False)
-            return time.perf_counter() - t
-    finally:
-        torch.set_num_threads(before)
+    with torch_threads(1), tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        evaluate(jobs, tmp, workers=workers, progress=False)
+        return time.perf_counter() - t
 
 
 def peak_rss_mb_of(argv: list[str]) -> float:
