@@ -104,10 +104,12 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
 
     from tcot_hybrid import __version__
     from tcot_hybrid.episode import file_digest
+    from tcot_hybrid.planners import planner_checkpoint
 
     def digest(path_of):
         try:
-            return file_digest(path_of())
+            path = path_of()
+            return None if path is None else file_digest(path)
         except Exception:  # noqa: BLE001 - e.g. the robot or checkpoint is what was refused
             return None
 
@@ -118,7 +120,7 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
             "fault": f"not started: {type(exc).__name__}: {exc}", "sim_time_s": 0.0, "wall_time_s": 0.0,
             "steps": 0, "plans": 0, "perturb": cfg.perturb.name, "events": [], "config": cfg.to_dict(),
             "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
-            "checkpoint_hash": digest(lambda: cfg.checkpoint) if cfg.checkpoint else None,
+            "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint)),
             "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
                          "python": platform.python_version()}}
 

@@ -235,6 +235,7 @@ class EpisodeRunner:
     def record(self, wall_time_s: float) -> dict:
         s, cfg = self.stack, self.cfg
         ex = s.executor
+        ck = getattr(s.planner, "checkpoint_path", None)
         success = bool(self.success and self.fault is None and s.sim.fault is None)
         return {
             "task": cfg.task, "suite": s.task.suite, "instruction": s.task.instruction,
@@ -253,7 +254,8 @@ class EpisodeRunner:
             "events": ex.events + ex.safety.event_dicts(),
             "config": cfg.to_dict(), "config_hash": cfg.digest(),
             "robot_model_hash": file_digest(s.robot.mjcf_path),
-            "checkpoint_hash": file_digest(cfg.checkpoint) if cfg.checkpoint else None,
+            "checkpoint": str(ck) if ck is not None else None,  # the file actually loaded (default or --checkpoint)
+            "checkpoint_hash": file_digest(ck) if ck is not None else None,
             "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
                          "python": platform.python_version()},
         }

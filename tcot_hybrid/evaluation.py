@@ -2,7 +2,8 @@
 × seeds, in parallel worker processes (or on a Ray cluster), resumable.
 
 Every finished episode is appended to ``DIR/episodes.jsonl`` at once, so an interrupted evaluation
-resumes where it stopped (jobs are keyed by their full config hash). ``DIR/eval.json`` holds one cell
+resumes where it stopped (jobs are keyed by their full config hash and the hash of the checkpoint their
+planner loads, so a retrained or replaced checkpoint is never credited with the old one's episodes). ``DIR/eval.json`` holds one cell
 per task × planner × mode × perturbation × robot × controller × IK × sweep value with success rate and
 standard error, plus failure-detector metrics; ``DIR/eval.md`` has the paper's tables (Table 1: per
 suite success ± s.e.; Table 4: ablation of the planning modes).
@@ -10,6 +11,7 @@ suite success ± s.e.; Table 4: ablation of the planning modes).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import math
@@ -20,7 +22,7 @@ import typing
 from collections import defaultdict
 from pathlib import Path
 
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.errors import ConfigError, TcotError
 from tcot_hybrid.run_config import RunConfig, _coerce
 
 CELL_KEYS = ("task", "suite", "planner", "mode", "perturb", "robot", "controller", "ik", "sweep")
@@ -39,8 +41,31 @@ class Job:
     @property
     def key(self) -> str:
         c = self.cfg
+        ck = checkpoint_digest(c)
         return "|".join(map(str, (c.task, c.planner, c.supervisor.mode, self.perturb, c.robot, c.controller,
-                                  c.ik, self.sweep, c.seed, c.digest())))
+                                  c.ik, self.sweep, c.seed, c.digest(), *([ck] if ck else []))))
+
+
+def checkpoint_digest(cfg: RunConfig) -> str | None:
+    """Hash of the checkpoint file the job's planner will load (the shipped default or ``--checkpoint``);
+    None for planners without one, or when it cannot be resolved (the episode then records why)."""
+    from tcot_hybrid.planners import planner_checkpoint
+
+    try:
+        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint)
+    except TcotError:
+        return None
+    if path is None or not path.is_file():
+        return None
+    st = path.stat()
+    return _digest_of(str(path.resolve()), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=64)
+def _digest_of(path: str, mtime_ns: int, size: int) -> str:  # keyed by mtime/size: a rewritten file is re-hashed
+    from tcot_hybrid.episode import file_digest
+
+    return file_digest(path)
 
 
 # --- sweeps --------------------------------------------------------------------------------------------

@@ -56,3 +56,24 @@ def test_evaluate_resumes(tmp_path):
     assert first["ran_now"] == 2 and first["cells"][0]["successes"] == 2
     again = evaluate(jobs, tmp_path, workers=1, progress=False)
     assert again["ran_now"] == 0 and again["cells"] == first["cells"]
+
+
+def test_job_key_follows_the_checkpoint_file(tmp_path):
+    """A retrained checkpoint at the same path must not inherit the old one's finished episodes on resume."""
+    import dataclasses
+
+    ck = tmp_path / "planner.safetensors"
+    ck.write_bytes(b"first weights")
+
+    def key(planner="learned", checkpoint=str(ck)):
+        (job,) = make_jobs(dataclasses.replace(RunConfig(), checkpoint=checkpoint), tasks=["goal_cube_on_plate"],
+                           planners=[planner], modes=["global"], robots=["panda"], controllers=["computed_torque"],
+                           iks=["mink"], episodes=1, seed_start=1000)
+        return job.key
+
+    before = key()
+    ck.write_bytes(b"retrained weights, same path")
+    assert key() != before
+    shipped = key(checkpoint=None)
+    assert shipped != key() and shipped.count("|") == key().count("|")  # the shipped default is hashed too
+    assert key("oracle", None).count("|") == before.count("|") - 1  # no checkpoint, no hash in the key

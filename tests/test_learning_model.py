@@ -25,6 +25,10 @@ def test_trajectory_outputs_shapes_and_ranges():
     uv = o["uv_px"]
     assert (uv >= -0.5).all() and (uv <= 127.5).all()  # soft-argmax never leaves the image
     assert torch.isfinite(o["z_m"]).all()
+    with torch.inference_mode():  # the detector's fast path: same pooled outputs, no waypoint decoder
+        d = m(*_inputs(), waypoints=False)
+    assert set(d) == {"grip_logit", "success_logit"}
+    assert torch.equal(d["success_logit"], o["success_logit"]) and torch.equal(d["grip_logit"], o["grip_logit"])
 
 
 def test_direct_and_fc_variants():

@@ -210,7 +210,8 @@ class PlannerNet(nn.Module):
         pooled = torch.cat([f16.float().mean((2, 3)), spatial_keypoints(f16), cond.float()], dim=1)
         return f4, f8, f16, pooled
 
-    def forward(self, image, tokens, mode, proprio) -> dict[str, torch.Tensor]:
+    def forward(self, image, tokens, mode, proprio, *, waypoints: bool = True) -> dict[str, torch.Tensor]:
+        """``waypoints=False`` skips the heatmap decoder (the detect prompt needs only the pooled head)."""
         cfg = self.cfg
         cond = self.condition(tokens, mode, proprio)
         f4, f8, f16, pooled = self.encode(image, cond)
@@ -220,6 +221,8 @@ class PlannerNet(nn.Module):
         n = cfg.n_waypoints
         pl = self.pooled_head(pooled).float()
         res = {"grip_logit": pl[:, :n], "success_logit": pl[:, n]}
+        if not waypoints:
+            return res
         if cfg.head == "heatmap":
             x = F.relu(self.f8(self.u8(F.relu(f8 + F.interpolate(self.l16(f16), scale_factor=2, mode="nearest"))), cond))
             x = F.relu(self.f4(self.u4(F.relu(f4 + F.interpolate(self.l8(x), scale_factor=2, mode="nearest"))), cond))

@@ -323,7 +323,7 @@ def predict(model, frames, idx: np.ndarray, mode: str, *, batch: int = 256) -> d
             ti = torch.from_numpy(idx[s:s + batch])
             img = frames.images[ti].permute(0, 3, 1, 2).float().div_(255.0).contiguous(memory_format=torch.channels_last)
             m = torch.full((len(ti),), MODE_IDS.get(mode, 0), dtype=torch.long)
-            o = model(img, frames.tokens[ti], m, frames.proprio[ti])
+            o = model(img, frames.tokens[ti], m, frames.proprio[ti], waypoints=mode != "detect")
             for k, v in o.items():
                 if k != "heat_logits":
                     outs.setdefault(k, []).append(v.float().numpy())

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from tcot_hybrid.camera import CameraModel
@@ -39,6 +40,21 @@ def list_planners() -> list[str]:
 def check_planner_name(name: str) -> None:
     if name not in _FACTORIES:
         raise ConfigError(unknown_name("planner", name, _FACTORIES))
+
+
+# Planners that run a network checkpoint, and the checkpoint kind each loads.
+CHECKPOINT_KINDS = {"learned": "trajectory", "direct": "direct"}
+
+
+def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None) -> Path | None:
+    """The checkpoint file planner ``name`` loads: ``checkpoint`` if given, else the robot's shipped default
+    (``CheckpointError`` naming the shipped ones if there is none); None for planners without a network."""
+    kind = CHECKPOINT_KINDS.get(name)
+    if kind is None:
+        return None
+    from tcot_hybrid.learning.checkpoint import default_checkpoint
+
+    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind)
 
 
 def make_planner(name: str, ctx: PlannerContext) -> Planner:

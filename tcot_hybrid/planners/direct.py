@@ -50,9 +50,10 @@ class DirectPlanner(NetworkPlanner):
 
     @classmethod
     def from_context(cls, ctx) -> DirectPlanner:
-        from tcot_hybrid.learning.checkpoint import default_checkpoint, load_checkpoint
+        from tcot_hybrid.learning.checkpoint import load_checkpoint
+        from tcot_hybrid.planners import planner_checkpoint
 
-        path = ctx.options.get("checkpoint") or default_checkpoint(ctx.robot_name, cls.kind)
+        path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"))
         ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
         return cls(ck, ctx.camera, robot_name=ctx.robot_name)
 

@@ -152,8 +152,9 @@ class NetworkPlanner(Planner):
             self._tokens[instruction] = self.torch.from_numpy(ids)[None]
         return self._tokens[instruction]
 
-    def infer(self, obs: Observation, mode: str) -> dict[str, np.ndarray]:
-        """Raw network outputs for ``obs`` in ``mode`` (batch of one), as numpy arrays."""
+    def infer(self, obs: Observation, mode: str, *, waypoints: bool = True) -> dict[str, np.ndarray]:
+        """Raw network outputs for ``obs`` in ``mode`` (batch of one), as numpy arrays; ``waypoints=False``
+        leaves out the waypoint decoder (p(success) only)."""
         from tcot_hybrid.learning.model import MODE_IDS
 
         torch = self.torch
@@ -162,7 +163,7 @@ class NetworkPlanner(Planner):
         tok = self.tokens(obs.instruction)
         x = torch.from_numpy(np.ascontiguousarray(img)).permute(2, 0, 1)[None].float().div_(255.0)
         with torch.inference_mode():
-            out = self.model(x, tok, torch.tensor([MODE_IDS[mode]]), torch.from_numpy(prop)[None])
+            out = self.model(x, tok, torch.tensor([MODE_IDS[mode]]), torch.from_numpy(prop)[None], waypoints=waypoints)
         return {k: v[0].float().numpy() for k, v in out.items() if k != "heat_logits"}
 
 
@@ -186,9 +187,10 @@ class LearnedPlanner(NetworkPlanner):
 
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
-        from tcot_hybrid.learning.checkpoint import default_checkpoint, load_checkpoint
+        from tcot_hybrid.learning.checkpoint import load_checkpoint
+        from tcot_hybrid.planners import planner_checkpoint
 
-        path = ctx.options.get("checkpoint") or default_checkpoint(ctx.robot_name, cls.kind)
+        path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"))
         ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
         return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
 
@@ -213,7 +215,7 @@ class LearnedPlanner(NetworkPlanner):
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""
-        out = self.infer(obs, "detect")
+        out = self.infer(obs, "detect", waypoints=False)
         logit = float(out["success_logit"])
         if not np.isfinite(logit):
             raise PlanningError(f"planner success logit is not finite: {logit}")
