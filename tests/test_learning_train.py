@@ -6,6 +6,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import dataclasses  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -132,6 +133,15 @@ def test_config_validation_and_files(tmp_path):
     with pytest.raises(ConfigError):
         load_train_config(p)
     assert not (tmp_path / "pwned").exists()
+
+
+def test_example_train_configs_load_and_chain():
+    """The shipped pipeline's configs are valid, and each round starts from the previous round's output."""
+    root = Path(__file__).resolve().parent.parent / "examples" / "configs"
+    stage2 = load_train_config(root / "train_stage2.yaml")
+    round2 = load_train_config(root / "train_stage2_round2.yaml")
+    assert stage2.init == "runs/train/stage1.safetensors" and round2.init == stage2.out
+    assert set(stage2.online_data) < set(round2.online_data)  # round 2 adds data, drops none
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
