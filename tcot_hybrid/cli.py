@@ -86,6 +86,13 @@ class RunCommand:
     """Open MuJoCo's interactive viewer (needs a display)."""
 
 
+def perturb_shorthand(argv: list[str]) -> list[str]:
+    """``tcot run --perturb NAME`` is short for ``--perturb.name NAME`` (the spelling ``tcot eval`` and
+    ``tcot collect`` use for their perturbation lists)."""
+    return ["--perturb.name" if a == "--perturb" else
+            "--perturb.name=" + a.split("=", 1)[1] if a.startswith("--perturb=") else a for a in argv]
+
+
 def parse_with_config(command_cls, argv: list[str], prog: str):
     """Parse a command dataclass whose ``cfg`` defaults come from ``--config FILE`` (if given) and whose
     flags override that file."""
@@ -131,7 +138,7 @@ def cmd_run(argv: list[str]) -> int:
     from tcot_hybrid.episode import EpisodeRunner, write_record
     from tcot_hybrid.video import EpisodeVideo, Timeline
 
-    cmd = parse_with_config(RunCommand, argv, "tcot run")
+    cmd = parse_with_config(RunCommand, perturb_shorthand(argv), "tcot run")
     if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
                         "use --video out.mp4 to record the episode instead")

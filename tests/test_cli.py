@@ -44,6 +44,7 @@ def test_run_writes_the_episode_record(tmp_path):
     (["run", "--task", "goal_open_drawer", "--planner", "psychic"], "oracle"),
     (["run", "--task", "goal_open_drawer", "--timing.sim-dt", "nan"], "sim_dt"),
     (["run", "--task", "goal_open_drawer", "--perturb.name", "meteor"], "object_moved"),
+    (["run", "--task", "goal_open_drawer", "--perturb", "meteor"], "object_moved"),
     (["run", "--task", "goal_open_drawer", "--controller-params", "kp_scael", "2"], "kp_scale"),
     (["eval", "--suite", "nope"], "spatial"),
     (["frobnicate"], "valid commands"),
@@ -59,3 +60,12 @@ def test_malformed_config_file_refused(tmp_path):
     cfg.write_text("timing:\n  ctrl_dt: fast\n")
     r = tcot("run", "--config", str(cfg), "--out", str(tmp_path))
     assert r.returncode != 0 and "ctrl_dt" in r.stderr
+
+
+def test_run_perturb_shorthand():
+    from tcot_hybrid.cli import RunCommand, parse_with_config, perturb_shorthand
+
+    for argv in (["--perturb", "object_drop"], ["--perturb=object_drop"], ["--perturb.name", "object_drop"]):
+        cmd = parse_with_config(RunCommand, perturb_shorthand(["--task", "goal_cube_on_plate", *argv]), "tcot run")
+        assert cmd.cfg.perturb.name == "object_drop"
+    assert perturb_shorthand(["--perturb.strength", "0.05"]) == ["--perturb.strength", "0.05"]
