@@ -29,6 +29,7 @@ import yaml
 
 from tcot_hybrid.episode import EpisodeRunner, validate_names
 from tcot_hybrid.errors import CheckpointError, ConfigError, PlanningError, RobotModelError, TcotError
+from tcot_hybrid.executor import ExecutorConfig
 from tcot_hybrid.lift import lift_waypoints
 from tcot_hybrid.perturbations import PerturbConfig
 from tcot_hybrid.plan import WaypointPlan
@@ -621,6 +622,32 @@ def test_rows16_17_push_and_camera_noise_never_diverge_or_break_limits(name, str
         assert_sound(r, rec)
         print(f"rows 16-17: {name}({strength}) {mode}: success={rec['success']}, "
               f"max |qd|/v_max {rec['max_velocity_ratio']:.2f}, saturated ticks {rec['safety']['saturations']}")
+
+
+def _held_back(force_n: float, *, reflex_rad: float | None) -> dict:
+    """goal_cube_on_plate with the hand held back by an upward force for 1.5 s (planner steps 10-24), like
+    an arm caught on an obstacle; the speed figure counts only from 0.1 s after the force ends."""
+    def hook(r, step):
+        sim = r.stack.sim
+        sim.data.xfrc_applied[sim.model.site_bodyid[sim.ee_site], :3] = (0, 0, force_n) if 10 <= step < 25 else 0.0
+        if step == 26:
+            r.stack.executor.max_velocity_ratio = 0.0
+    r = make_runner(task="goal_cube_on_plate", time_limit_s=5.0, pre_step_hook=hook,
+                    executor=ExecutorConfig(reflex_tracking_rad=reflex_rad))
+    return r.run()
+
+
+def test_row16_held_back_arm_triggers_the_tracking_reflex_and_does_not_whip_when_freed():
+    """Without the reflex the controller winds up against the obstacle and whips the arm past v_max when it
+    comes free; with it the plan is dropped, the reference brakes where the arm is, and nothing whips."""
+    off = _held_back(150.0, reflex_rad=None)
+    on = _held_back(150.0, reflex_rad=0.25)
+    assert off["tracking_reflexes"] == 0 and off["max_velocity_ratio"] > 1.0  # the failure the reflex prevents
+    assert on["tracking_reflexes"] >= 1 and events(on, "tracking_reflex")[0]["error_rad"] > 0.25
+    assert on["max_velocity_ratio"] < 1.0 and on["max_tracking_error_rad"] < 0.3 < off["max_tracking_error_rad"]
+    assert on["fault"] is None and not on["success"]  # the plan was dropped: a held arm, never a false success
+    print(f"row 16 (held back, 150 N): after release max |qd|/v_max {off['max_velocity_ratio']:.2f} without the "
+          f"reflex, {on['max_velocity_ratio']:.2f} with it ({on['tracking_reflexes']} reflexes)")
 
 
 def test_row15_glsr_recovers_a_dropped_object():
