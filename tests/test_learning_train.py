@@ -63,6 +63,17 @@ def test_tiny_training_lowers_loss_and_writes_checkpoint(demo_file, tmp_path, ca
     ck = load_checkpoint(res.checkpoint, robot="panda", camera=camera, kind="trajectory")
     assert ck.meta["metrics"]["best_epoch"] >= 1 and ck.meta["train_demos"] == 10
     assert ck.meta["vocabulary"][:2] == ["<pad>", "<unk>"]
+    # the held-out report command, written to a named section and file stem (e.g. a training-split report)
+    from tcot_hybrid.learning.evaluate import main as evaluate_main
+
+    md = tmp_path / "report.md"
+    md.write_text("# report\n<!-- planner_eval_train:start -->\n<!-- planner_eval_train:end -->\n")
+    assert evaluate_main(["--checkpoint", str(res.checkpoint), "--data", str(demo_file), "--split", "train",
+                          "--out", str(tmp_path / "ev"), "--threads", "1", "--readme", str(md),
+                          "--section", "planner_eval_train", "--stem", "train_split"]) == 0
+    report = json.loads((tmp_path / "ev" / "train_split.json").read_text())
+    assert report["split"] == "train" and report["result"]["success_auroc"] is not None
+    assert "<!-- planner_eval_train:start -->" in md.read_text() and "planner_eval:start" not in md.read_text()
 
 
 def test_same_seed_same_weights(demo_file, tmp_path):

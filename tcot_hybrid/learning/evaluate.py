@@ -219,7 +219,7 @@ def markdown(r: dict) -> str:
 
 
 def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: str | Path | None = None,
-        command: str = "") -> dict:
+        command: str = "", stem: str | None = None) -> dict:
     from tcot_hybrid.learning.checkpoint import load_checkpoint
     from tcot_hybrid.learning.data import env_of, load_frames
     from tcot_hybrid.learning.vocab import Vocabulary
@@ -242,7 +242,7 @@ def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: 
     if out is not None:
         o = Path(out)
         o.mkdir(parents=True, exist_ok=True)
-        stem = "planner_eval" if ck.meta["kind"] != "direct" else "direct_eval"
+        stem = stem or ("planner_eval" if ck.meta["kind"] != "direct" else "direct_eval")
         (o / f"{stem}.json").write_text(json.dumps(report, indent=1) + "\n")
         (o / f"{stem}.md").write_text(markdown(report))
     return report
@@ -267,17 +267,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--readme", type=Path, default=None,
                    help="also write the report into this Markdown file's <!-- planner_eval:start/end --> "
                         "(direct checkpoints: direct_eval) section")
+    p.add_argument("--section", default=None,
+                   help="name of that Markdown section instead (e.g. planner_eval_train for a training-split report)")
+    p.add_argument("--stem", default=None,
+                   help="file name stem in --out (default planner_eval / direct_eval)")
     args = p.parse_args(argv)
     import torch
 
     torch.set_num_threads(args.threads)
     cmdline = "python -m tcot_hybrid.learning.evaluate " + " ".join(sys.argv[1:] if argv is None else argv)
-    r = run(args.checkpoint, args.data, split=args.split, out=args.out, command=cmdline)
+    r = run(args.checkpoint, args.data, split=args.split, out=args.out, command=cmdline, stem=args.stem)
     print(markdown(r))
     if args.readme:
         from tcot_hybrid.bench import update_readme_section
 
-        update_readme_section(args.readme, "direct_eval" if r["kind"] == "direct" else "planner_eval", markdown(r))
+        section = args.section or ("direct_eval" if r["kind"] == "direct" else "planner_eval")
+        update_readme_section(args.readme, section, markdown(r))
     return 0
 
 
