@@ -72,7 +72,7 @@ def test_tiny_training_lowers_loss_and_writes_checkpoint(demo_file, tmp_path, ca
                           "--out", str(tmp_path / "ev"), "--threads", "1", "--readme", str(md),
                           "--section", "planner_eval_train", "--stem", "train_split"]) == 0
     report = json.loads((tmp_path / "ev" / "train_split.json").read_text())
-    assert report["split"] == "train" and report["result"]["success_auroc"] is not None
+    assert report["split"] == "train" and 0.0 <= report["result"]["detect"]["auroc"] <= 1.0
     assert "<!-- planner_eval_train:start -->" in md.read_text() and "planner_eval:start" not in md.read_text()
 
 
