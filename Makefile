@@ -38,7 +38,7 @@ planner: setup
 	$(BIN)/tcot train --config examples/configs/train_stage2.yaml
 	# second online round: the stage-2 planner's own GLSR episodes, mostly for its failure detector
 	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage2.safetensors --mode glsr \
-		--perturb none,$(PERTURBS) --episodes-per-task 5 --seed-start 300 --out data/online_learned_glsr.hdf5
+		--perturb none,$(PERTURBS) --episodes-per-task 3 --seed-start 300 --out data/online_learned_glsr.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round2.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
