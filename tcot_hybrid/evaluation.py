@@ -149,6 +149,15 @@ def run_job(job: Job) -> dict:
     return rec
 
 
+def longest_first(jobs: list[Job]) -> list[Job]:
+    """Jobs with the longest task time limit first (stable otherwise): workers that pick up the long
+    episodes early finish together, instead of one worker running a last long episode alone."""
+    from tcot_hybrid.tasks import make_task
+
+    limits = {name: make_task(name).time_limit_s for name in {j.cfg.task for j in jobs}}
+    return sorted(jobs, key=lambda j: -limits[j.cfg.task])
+
+
 def _done_keys(path: Path) -> dict[str, dict]:
     done = {}
     if path.exists():
@@ -184,7 +193,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     out.mkdir(parents=True, exist_ok=True)
     log = out / "episodes.jsonl"
     done = _done_keys(log)
-    todo = [j for j in jobs if j.key not in done]
+    todo = longest_first([j for j in jobs if j.key not in done])
     t0 = time.perf_counter()
     pool = None
     with open(log, "a") as f, tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="eval", unit="ep",

@@ -3,7 +3,8 @@ import math
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.evaluation import aggregate, auroc, detector_metrics, evaluate, make_jobs, parse_sweep, with_field
+from tcot_hybrid.evaluation import (aggregate, auroc, detector_metrics, evaluate, longest_first, make_jobs, parse_sweep,
+                                    with_field)
 from tcot_hybrid.run_config import RunConfig
 
 
@@ -77,3 +78,14 @@ def test_job_key_follows_the_checkpoint_file(tmp_path):
     shipped = key(checkpoint=None)
     assert shipped != key() and shipped.count("|") == key().count("|")  # the shipped default is hashed too
     assert key("oracle", None).count("|") == before.count("|") - 1  # no checkpoint, no hash in the key
+
+
+def test_longest_tasks_are_scheduled_first():
+    from tcot_hybrid.tasks import make_task
+
+    jobs = make_jobs(RunConfig(), tasks=["goal_cube_on_plate", "tool_pull_cube_with_stick", "long_stack_three_blocks"],
+                     planners=["oracle"], modes=["global"], robots=["panda"], controllers=["computed_torque"],
+                     iks=["mink"], episodes=2, seed_start=1000)
+    ordered = longest_first(jobs)
+    limits = [make_task(j.cfg.task).time_limit_s for j in ordered]
+    assert limits == sorted(limits, reverse=True) and sorted(j.key for j in ordered) == sorted(j.key for j in jobs)
