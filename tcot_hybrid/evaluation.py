@@ -33,6 +33,7 @@ DETECTOR_STEPS_AFTER_SUCCESS = 5  # planner steps past success on which the dete
 class Job:
     cfg: RunConfig
     sweep: str = "-"  # "field=value" when this job belongs to a sweep
+    fixed_key: str | None = None  # the key as the parent process computed it (workers never recompute it)
 
     @property
     def perturb(self) -> str:
@@ -40,6 +41,8 @@ class Job:
 
     @property
     def key(self) -> str:
+        if self.fixed_key is not None:
+            return self.fixed_key
         c = self.cfg
         ck = checkpoint_digest(c)
         return "|".join(map(str, (c.task, c.planner, c.supervisor.mode, self.perturb, c.robot, c.controller,
@@ -193,6 +196,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     out.mkdir(parents=True, exist_ok=True)
     log = out / "episodes.jsonl"
     done = _done_keys(log)
+    jobs = [dataclasses.replace(j, fixed_key=j.key) for j in jobs]  # hashed once, here: workers reuse it
     todo = longest_first([j for j in jobs if j.key not in done])
     t0 = time.perf_counter()
     pool = None

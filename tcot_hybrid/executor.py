@@ -42,7 +42,8 @@ class ExecutorConfig:
                       reference by more than this, the arm is blocked (it hit something) or was knocked
                       far off; the plan is dropped and the reference brakes from the measured state, so the
                       controller stops pushing instead of winding up and whipping the arm when it comes
-                      free. Event ``tracking_reflex``; the supervisor decides what next. Nominal tracking
+                      free. Event ``tracking_reflex``; the supervisor decides what next (GLSR and local
+                      modes replan; a frozen global plan is not resumed, the arm holds). Nominal tracking
                       stays below 0.08 rad (docs/eval-*); None = off.
     """
 
@@ -58,8 +59,8 @@ class ExecutorConfig:
             require_nonnegative(name, getattr(self, name))
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
-        if self.reflex_tracking_rad is not None:
-            require_positive("reflex_tracking_rad", self.reflex_tracking_rad)
+        if self.reflex_tracking_rad is not None:  # None (YAML null) switches the reflex off
+            require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
 
 
 class MotionExecutor:
@@ -251,4 +252,5 @@ class MotionExecutor:
         self.smoother.brake(self.sim.q, self.sim.qd)
         self._ik_seed = self.sim.q
         self.phase = "done"
-        self.controller.reset(self.dyn, self._last_tau)
+        self._arrived_at = self._waiting_at = None  # a replan to the same stop point starts a fresh wait
+        self.controller.reset(self.dyn)  # no blend from the wound-up torque: stop pushing now

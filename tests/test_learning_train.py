@@ -73,7 +73,11 @@ def test_tiny_training_lowers_loss_and_writes_checkpoint(demo_file, tmp_path, ca
                           "--section", "planner_eval_train", "--stem", "train_split"]) == 0
     report = json.loads((tmp_path / "ev" / "train_split.json").read_text())
     assert report["split"] == "train" and 0.0 <= report["result"]["detect"]["auroc"] <= 1.0
-    assert "<!-- planner_eval_train:start -->" in md.read_text() and "planner_eval:start" not in md.read_text()
+    section = md.read_text().split("<!-- planner_eval_train:start -->")[1].split("<!-- planner_eval_train:end -->")[0]
+    assert "Success detection: AUROC" in section and str(res.checkpoint) in section
+    for bad in (["--stem", "../escape"], ["--section", "nowhere"]):  # refused before any evaluation
+        with pytest.raises(SystemExit):
+            evaluate_main(["--checkpoint", str(res.checkpoint), "--data", str(demo_file), "--readme", str(md), *bad])
 
 
 def test_same_seed_same_weights(demo_file, tmp_path):

@@ -650,6 +650,15 @@ def test_row16_held_back_arm_triggers_the_tracking_reflex_and_does_not_whip_when
           f"reflex, {on['max_velocity_ratio']:.2f} with it ({on['tracking_reflexes']} reflexes)")
 
 
+def test_row20_tracking_reflex_setting_is_checked(tmp_path):
+    for bad in (-0.1, 0.0, float("nan"), True):
+        with pytest.raises(ConfigError, match="reflex_tracking_rad"):
+            ExecutorConfig(reflex_tracking_rad=bad)
+    f = tmp_path / "off.yaml"
+    f.write_text("executor:\n  reflex_tracking_rad: null\n")
+    assert load_config_file(f).executor.reflex_tracking_rad is None  # null switches the reflex off
+
+
 def test_row15_glsr_recovers_a_dropped_object():
     """object_drop defeats the frozen global plan; GLSR (oracle detector) replans within t_l and re-grasps.
     No divergence, fault or limit violation either way."""

@@ -272,6 +272,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stem", default=None,
                    help="file name stem in --out (default planner_eval / direct_eval)")
     args = p.parse_args(argv)
+    if args.stem is not None and (not args.stem or Path(args.stem).name != args.stem or args.stem in (".", "..")):
+        p.error(f"--stem must be a plain file name inside --out, got {args.stem!r}")
+    if args.section is not None and args.readme is None:
+        p.error("--section names a section of the --readme file; give --readme too")
+    if args.readme is not None:  # fail before the evaluation, not after it
+        section = args.section or "planner_eval/direct_eval"
+        text = args.readme.read_text() if args.readme.is_file() else ""
+        names = [args.section] if args.section else ["planner_eval", "direct_eval"]
+        if not any(f"<!-- {n}:start -->" in text and f"<!-- {n}:end -->" in text for n in names):
+            p.error(f"{str(args.readme)!r} has no <!-- {section}:start/end --> section to write into")
     import torch
 
     torch.set_num_threads(args.threads)
