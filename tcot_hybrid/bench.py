@@ -308,12 +308,25 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _section_markers(marker: str) -> tuple[str, str]:
+    return f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
+
+
+def has_readme_section(readme: str | Path, marker: str) -> bool:
+    """Whether the Markdown file exists and has a <!-- {marker}:start/end --> section."""
+    p = Path(readme)
+    if not p.is_file():
+        return False
+    s = p.read_text()
+    return all(m in s for m in _section_markers(marker))
+
+
 def update_readme_section(readme: str | Path, marker: str, text: str, *, inside: str | None = None) -> None:
     """Replace the text between <!-- {marker}:start --> and <!-- {marker}:end --> in the README. With
     ``inside``, a missing section is first created just before <!-- {inside}:end -->."""
     p = Path(readme)
     s = p.read_text()
-    start, end = f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
+    start, end = _section_markers(marker)
     if (start not in s or end not in s) and inside is not None and f"<!-- {inside}:end -->" in s:
         s = s.replace(f"<!-- {inside}:end -->", f"{start}\n{end}\n<!-- {inside}:end -->", 1)
     if start not in s or end not in s:

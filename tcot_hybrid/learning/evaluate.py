@@ -277,11 +277,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.section is not None and args.readme is None:
         p.error("--section names a section of the --readme file; give --readme too")
     if args.readme is not None:  # fail before the evaluation, not after it
-        section = args.section or "planner_eval/direct_eval"
-        text = args.readme.read_text() if args.readme.is_file() else ""
+        from tcot_hybrid.bench import has_readme_section
+
         names = [args.section] if args.section else ["planner_eval", "direct_eval"]
-        if not any(f"<!-- {n}:start -->" in text and f"<!-- {n}:end -->" in text for n in names):
-            p.error(f"{str(args.readme)!r} has no <!-- {section}:start/end --> section to write into")
+        if not any(has_readme_section(args.readme, n) for n in names):
+            p.error(f"{str(args.readme)!r} has no <!-- {'/'.join(names)}:start/end --> section to write into")
     import torch
 
     torch.set_num_threads(args.threads)
