@@ -23,6 +23,11 @@ from tcot_hybrid.tasks.objects import (
 TRAVEL_Z = 0.20  # [m] TCP height for transport moves (clears bowls, baskets and the drawer cabinet)
 APPROACH_DZ = 0.08  # [m] pre-grasp/pre-place height above the target point
 RETREAT_DZ = 0.10  # [m] lift after releasing
+# [m] gap between the lowered hook and the target's far face. A learned planner imitates the demo's TCP track
+# sampled every n_g = 4 steps; that chord cuts the corner where the hook comes down. Replaying the sampled
+# track itself as a frozen plan (tcot_hybrid.data.replay) succeeded in 0/10 demos at 1.5 cm, 7/10 at 3.5 cm,
+# 10/10 at 5 and 6.5 cm (also with 1.5 px / 0.8 cm noise on every point).
+HOOK_CLEARANCE_M = 0.065
 
 
 @dataclass(frozen=True)
@@ -225,9 +230,9 @@ class HookPull(Skill):
             # Already hooked behind the target and low: keep pulling from here (stable under replanning).
             return [_kf(self.pull_to_x, tcp[1], gz_low, True), _kf(self.pull_to_x, tcp[1], gz_low, False),
                     _kf(self.pull_to_x, tcp[1], gz_low + RETREAT_DZ, False)]
-        # Hook's near face 1.5 cm behind the target's far face; the shaft runs beside the target (on the
-        # stick's side) so that lowering the stick does not land it on top of the target.
-        hook_x = c[0] + half + 0.015 + 0.0125
+        # Hook's near face HOOK_CLEARANCE_M behind the target's far face; the shaft runs beside the target (on
+        # the stick's side) so that lowering the stick does not land it on top of the target.
+        hook_x = c[0] + half + HOOK_CLEARANCE_M + 0.0125
         gx = hook_x - (STICK_LENGTH - 0.0125 - STICK_GRIP_FROM_END)
         side = 1.0 if grip[1] >= c[1] else -1.0
         gy = c[1] + side * (half + 0.0125 + 0.012)
