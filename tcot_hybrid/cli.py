@@ -312,6 +312,7 @@ def cmd_bench(argv: list[str]) -> int:
 COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_bench}
 COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromlist=["_"]).cmd_collect(argv)
 COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
+COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist=["_"]).cmd_replay(argv)
 COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
 
 

@@ -76,7 +76,9 @@ def validate_names(cfg: RunConfig) -> None:
         raise ConfigError(f"checkpoint {cfg.checkpoint!r} is not a file")
 
 
-def build_stack(cfg: RunConfig) -> Stack:
+def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
+    """Wire every stage for ``cfg``. ``planner_factory(ctx)`` replaces the registry's ``cfg.planner`` (a planner
+    that is not a registry entry, e.g. :class:`tcot_hybrid.data.replay.LabelReplayPlanner`)."""
     validate_names(cfg)
     robot = load_robot_spec(cfg.robot)
     task = make_task(cfg.task)
@@ -95,7 +97,7 @@ def build_stack(cfg: RunConfig) -> Stack:
                               dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
     ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint})
-    planner = make_planner(cfg.planner, ctx)
+    planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx)
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)
 
 
@@ -106,9 +108,9 @@ class EpisodeRunner:
     fault and success checks.
     """
 
-    def __init__(self, cfg: RunConfig, *, frame_hook=None, pre_step_hook=None):
+    def __init__(self, cfg: RunConfig, *, frame_hook=None, pre_step_hook=None, planner_factory=None):
         self.cfg = cfg
-        self.stack = build_stack(cfg)
+        self.stack = build_stack(cfg, planner_factory=planner_factory)
         self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
         self.pre_step_hook = pre_step_hook  # called at the start of every planner step, before planning
         self.supervisor = Supervisor(cfg.supervisor, self.stack.planner)

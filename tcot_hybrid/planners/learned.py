@@ -74,6 +74,19 @@ def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, 
     return out
 
 
+def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
+                step: int, config: LearnedPlannerConfig, meta: dict | None = None) -> WaypointPlan:
+    """The plan for waypoints given as pixel + TCP height + gripper bit (the learned planner's output form):
+    ``depth_m`` where each pixel's ray meets z = z_m, gripper switches aligned to the bottom of their descent."""
+    try:
+        depth = depth_at_height(camera, uv_px, z_m)
+    except LiftError as exc:
+        raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
+    closed = align_gripper_switches(z_m, closed, window=config.switch_window, min_rise_m=config.switch_min_rise_m)
+    return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
+                        step=step, meta=meta or {})
+
+
 def check_image(image, camera: CameraModel) -> np.ndarray:
     """The planner image as (H, W, 3) uint8 matching ``camera``, else PlanningError saying what is wrong."""
     if image is None:
@@ -204,14 +217,8 @@ class LearnedPlanner(NetworkPlanner):
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
         check_outputs(uv, z, prob)
-        try:
-            depth = depth_at_height(self.camera, uv, z)
-        except LiftError as exc:
-            raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
-        closed = align_gripper_switches(z, prob > 0.5, window=self.config.switch_window,
-                                        min_rise_m=self.config.switch_min_rise_m)
-        return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=closed, camera=self.camera.name, kind=mode,
-                            step=obs.step, meta={"z_m": z, "gripper_prob": prob})
+        return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
+                           meta={"z_m": z, "gripper_prob": prob})
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""

@@ -1,0 +1,168 @@
+"""Label replay: execute each demonstration's own global trajectory label as a frozen plan.
+
+The learned planner is trained to reproduce the eq.-4 window at t = 0 (``L_g // 2 + 1`` points every ``n_g``
+steps of the demo's TCP track) and its frozen-global success is bounded by how well that label itself
+solves the task when run through the real motion stack (lift → IK → Ruckig → controller). A time-sampled
+track cuts corners: the hook of the tool task came down on the cube in every replay while its clearance
+was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaussian noise on every point
+(the size of the network's errors):
+
+    tcot replay --data data/heldout_panda.hdf5 --noise-px 1.5 --noise-z-m 0.008 --out docs/planner-eval/replay.json
+
+Each demo is re-run with its own seed, so the scene is the one that was recorded.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from tcot_hybrid.config import require_nonnegative
+from tcot_hybrid.data.dataset import open_demos
+from tcot_hybrid.data.labels import TrajectoryWindowConfig, global_indices, track_from_arrays
+from tcot_hybrid.errors import ConfigError, PlanningError
+from tcot_hybrid.planners.base import Observation, Planner
+from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReplayConfig:
+    """windows: the label windows (only L_g and n_g matter). noise_px / noise_z_m: standard deviation of the
+    Gaussian noise added to every replayed pixel [px] / TCP height [m] (0 = the exact label); seeded per demo
+    by ``noise_seed`` and the demo's seed."""
+
+    windows: TrajectoryWindowConfig = TrajectoryWindowConfig()
+    noise_px: float = 0.0
+    noise_z_m: float = 0.0
+    noise_seed: int = 0
+    learned: LearnedPlannerConfig = LearnedPlannerConfig()
+
+    def __post_init__(self) -> None:
+        require_nonnegative("noise_px", self.noise_px)
+        require_nonnegative("noise_z_m", self.noise_z_m)
+
+
+class LabelReplayPlanner(Planner):
+    """Returns the demo's t = 0 global label (points from now on) as its only plan; no image, no detector."""
+
+    name = "label_replay"
+    needs_image = False
+
+    def __init__(self, uv_px: np.ndarray, z_m: np.ndarray, gripper_closed: np.ndarray, camera, *,
+                 config: ReplayConfig, demo_seed: int):
+        w = config.windows
+        idx = global_indices(len(uv_px), 0, w)[w.global_center:]
+        rng = np.random.default_rng([config.noise_seed, demo_seed])
+        self.uv = uv_px[idx].astype(float) + rng.normal(0.0, config.noise_px, (len(idx), 2))
+        self.z = z_m[idx].astype(float) + rng.normal(0.0, config.noise_z_m, len(idx))
+        self.closed = np.asarray(gripper_closed)[idx].astype(bool)
+        self.camera, self.config = camera, config
+
+    def plan(self, obs: Observation, *, mode: str):
+        if mode != "global" or obs.step != 0:
+            raise PlanningError(f"label replay has only the t = 0 global label; asked for a {mode!r} plan at "
+                                f"step {obs.step} (run it with supervisor.mode = 'global')")
+        return height_plan(self.camera, self.uv, self.z, self.closed, kind="global", step=0,
+                           config=self.config.learned)
+
+
+def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
+    """Run one demo's label as a frozen global plan; {demo, task, seed, steps, success, fault}."""
+    from tcot_hybrid.config import TimingConfig
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.scene import SceneConfig
+
+    with open_demos(path) as f:
+        info, env = f.info(name), dict(f.env_args)
+        track = track_from_arrays(f.read(name, ["obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed"]))
+    base = RunConfig()
+    cfg = RunConfig(task=info.task, seed=info.seed, robot=info.robot, controller=env["controller"], ik=env["ik"],
+                    timing=TimingConfig(sim_dt=env["sim_dt"], ctrl_dt=env["ctrl_dt"], plan_dt=env["plan_dt"]),
+                    scene=replace(SceneConfig(), planner_camera=env["camera"], planner_image_px=int(env["width"])),
+                    supervisor=replace(base.supervisor, mode="global"))
+    runner = EpisodeRunner(cfg, planner_factory=lambda ctx: LabelReplayPlanner(
+        track.uv_px, track.z_m, track.gripper_closed, ctx.camera, config=config, demo_seed=info.seed))
+    rec = runner.run()
+    return {"demo": name, "task": info.task, "seed": info.seed, "steps": len(track.uv_px), "success": rec["success"],
+            "fault": rec["fault"]}
+
+
+def _job(args):
+    return replay_demo(*args)
+
+
+def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), tasks: list[str] | None = None,
+                workers: int = 2, progress: bool = True) -> dict:
+    """Replay every successful demo of ``path`` (optionally only ``tasks``); per-task success and the demos."""
+    from tqdm import tqdm
+
+    with open_demos(path) as f:
+        infos = [f.info(n) for n in f.demos]
+    known = sorted({i.task for i in infos})
+    for t in tasks or []:
+        if t not in known:
+            raise ConfigError(f"task {t!r} has no demo in {path}; its tasks: {', '.join(known)}")
+    names = [i.name for i in infos if i.success and (not tasks or i.task in tasks)]
+    if not names:
+        raise ConfigError(f"no successful demo to replay in {path}")
+    t0 = time.perf_counter()
+    jobs = [(str(path), n, config) for n in names]
+    with tqdm(total=len(jobs), desc="replay", unit="demo", disable=not progress) as bar:
+        if workers > 1:
+            with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+                rows = [bar.update() or r for r in pool.imap_unordered(_job, jobs)]
+        else:
+            rows = [bar.update() or _job(j) for j in jobs]
+    rows.sort(key=lambda r: (r["task"], r["seed"]))
+    per_task: dict[str, dict] = {}
+    for r in rows:
+        c = per_task.setdefault(r["task"], {"demos": 0, "successes": 0})
+        c["demos"] += 1
+        c["successes"] += int(r["success"])
+    for c in per_task.values():
+        c["success_rate"] = round(c["successes"] / c["demos"], 4)
+    w = config.windows
+    return {"data": str(path), "L_g": w.L_g, "n_g": w.n_g, "noise_px": config.noise_px, "noise_z_m": config.noise_z_m,
+            "noise_seed": config.noise_seed, "per_task": per_task,
+            "success_rate": round(sum(r["success"] for r in rows) / len(rows), 4), "demos": rows,
+            "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def cmd_replay(argv: list[str]) -> int:
+    """``tcot replay --data FILE``: success of each demo's own t = 0 global label run as a frozen plan."""
+    p = argparse.ArgumentParser(prog="tcot replay", description=(
+        "Run every demonstration's own global trajectory label (eq. 4 at t = 0) as a frozen plan through the "
+        "motion stack, with the demo's seed: the ceiling of frozen-global imitation for these windows."))
+    p.add_argument("--data", type=Path, required=True, help="demo file written by tcot collect")
+    p.add_argument("--tasks", help="comma-separated task names (default: every task in the file)")
+    p.add_argument("--L-g", dest="L_g", type=int, default=TrajectoryWindowConfig.L_g, help="global window length")
+    p.add_argument("--n-g", dest="n_g", type=int, default=TrajectoryWindowConfig.n_g, help="global stride [steps]")
+    p.add_argument("--noise-px", type=float, default=0.0, help="Gaussian noise on every pixel [px]")
+    p.add_argument("--noise-z-m", type=float, default=0.0, help="Gaussian noise on every TCP height [m]")
+    p.add_argument("--noise-seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--out", type=Path, help="write the report as JSON here")
+    args = p.parse_args(argv)
+    if args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    if args.n_g < 2:  # TrajectoryWindowConfig needs some local stride n_l < n_g; the replay uses no local window
+        raise ConfigError(f"--n-g must be >= 2, got {args.n_g}")
+    windows = TrajectoryWindowConfig(L_g=args.L_g, n_g=args.n_g, L_l=1, n_l=1)
+    cfg = ReplayConfig(windows=windows, noise_px=args.noise_px, noise_z_m=args.noise_z_m, noise_seed=args.noise_seed)
+    tasks = [t for t in args.tasks.split(",") if t] if args.tasks else None
+    report = replay_file(args.data, config=cfg, tasks=tasks, workers=args.workers)
+    report["command"] = "tcot replay " + " ".join(argv)
+    for task, c in report["per_task"].items():
+        print(f"{task}: {c['successes']}/{c['demos']}")
+    print(f"all: {report['success_rate']:.3f} over {len(report['demos'])} demos in {report['wall_s']} s")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(report, indent=1) + "\n")
+        print(f"-> {args.out}")
+    return 0
