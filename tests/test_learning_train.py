@@ -26,6 +26,7 @@ from tcot_hybrid.learning.train import (  # noqa: E402
     cmd_train,
     lift_points,
     load_train_config,
+    steps_to_success,
     train,
 )
 from tcot_hybrid.learning.vocab import Vocabulary  # noqa: E402
@@ -131,6 +132,24 @@ def test_detect_samples_are_balanced(demo_file):
     assert 0.45 < share < 0.55 and fs.success.mean().item() < 0.2
 
 
+def test_detect_negatives_skip_the_frames_just_before_success(demo_file):
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    fs = load_frames(demo_file, "train", vocab, windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
+    to_go = steps_to_success(fs)
+    succ = fs.success.numpy() > 0.5
+    assert np.all(to_go[succ] <= 0) and np.all(to_go[~succ] > 0)
+    first = {d: fs.t[(fs.demo == d) & succ].min() for d in np.unique(fs.demo[succ])}
+    i = np.flatnonzero(~succ)[0]
+    assert to_go[i] == first[fs.demo[i]] - fs.t[i]
+    cfg = TrainConfig(data=str(demo_file))
+    every = Batcher(fs, cfg, np.random.default_rng(0)).neg_idx
+    skip = Batcher(fs, dataclasses.replace(cfg, detect_ignore_before_success=3), np.random.default_rng(0)).neg_idx
+    assert set(skip) == {j for j in every if to_go[j] > 3}
+    assert 0 < len(every) - len(skip) <= 3 * len(first)
+    with pytest.raises(ConfigError, match="detect_ignore_before_success"):
+        TrainConfig(detect_ignore_before_success=-1)
+
+
 def test_config_validation_and_files(tmp_path):
     with pytest.raises(ConfigError, match="sum to 1"):
         MixConfig(global_frac=0.5, local_frac=0.4, detect_frac=0.0)
@@ -157,6 +176,8 @@ def test_example_train_configs_load_and_chain():
     round2 = load_train_config(root / "train_stage2_round2.yaml")
     assert stage2.init == "runs/train/stage1.safetensors" and round2.init == stage2.out
     assert set(stage2.online_data) < set(round2.online_data)  # round 2 adds data, drops none
+    round3 = load_train_config(root / "train_stage2_round3.yaml")
+    assert round3.init == round2.out and set(round2.online_data) < set(round3.online_data)
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):

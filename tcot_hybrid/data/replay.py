@@ -113,12 +113,17 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
         raise ConfigError(f"no successful demo to replay in {path}")
     t0 = time.perf_counter()
     jobs = [(str(path), n, config) for n in names]
+    rows: list[dict] = []
     with tqdm(total=len(jobs), desc="replay", unit="demo", disable=not progress) as bar:
         if workers > 1:
             with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-                rows = [bar.update() or r for r in pool.imap_unordered(_job, jobs)]
+                for r in pool.imap_unordered(_job, jobs):
+                    rows.append(r)
+                    bar.update()
         else:
-            rows = [bar.update() or _job(j) for j in jobs]
+            for j in jobs:
+                rows.append(_job(j))
+                bar.update()
     rows.sort(key=lambda r: (r["task"], r["seed"]))
     per_task: dict[str, dict] = {}
     for r in rows:

@@ -109,6 +109,12 @@ class TrainConfig:
                      there are any). Recovery states (e.g. the arm above an empty bowl after a drop) are a
                      small share of all frames and look like the end of a demonstration, where the local
                      label is "stay": up makes the local prompt recover, down keeps it closer to the demos.
+    detect_ignore_before_success: detection negatives exclude the last k frames before an episode's first
+                     success frame. The predicate needs the released object to be still, so those frames show
+                     the same scene as the first success frames (object in place, gripper open) with the
+                     opposite label; the detector learned to wait for the arm to move away and called the first
+                     1-4 success steps failures. 0 = use every frame (rounds 1-2). Validation AUROC still
+                     counts every frame.
     direct_horizon:  direct kind: predict the TCP displacement over this many planner steps.
     max_train_demos: use only the first N training demos (quick experiments, tests); None = all.
     val_max_frames:  validation frames per epoch (every k-th frame; all t = 0 frames kept). Down: faster epochs.
@@ -140,6 +146,7 @@ class TrainConfig:
     mix_stage1: MixConfig = field(default_factory=MixConfig)
     mix_stage2: MixConfig = field(default_factory=lambda: MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
     recovery_frac: float = 0.6
+    detect_ignore_before_success: int = 0
     direct_horizon: int = 3
     max_train_demos: int | None = None
     val_max_frames: int = 2000
@@ -157,6 +164,7 @@ class TrainConfig:
         for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride"):
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
+        require_int("detect_ignore_before_success", self.detect_ignore_before_success, minimum=0)
         object.__setattr__(self, "online_data", tuple(str(p) for p in self.online_data))  # YAML gives a list
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
@@ -180,6 +188,15 @@ class TrainConfig:
 
 # --- batches --------------------------------------------------------------------------------------------
 
+def steps_to_success(frames) -> np.ndarray:
+    """(N,) steps from each frame to its episode's first success frame (<= 0 from then on; a large number in
+    episodes that never succeed)."""
+    succ = frames.success.numpy() > 0.5
+    first = np.full(len(frames.demos), np.iinfo(np.int32).max, dtype=np.int64)
+    np.minimum.at(first, frames.demo[succ], frames.t[succ])
+    return first[frames.demo] - frames.t
+
+
 class Batcher:
     """Draws mixed-mode batches with augmentation; deterministic given its numpy Generator."""
 
@@ -188,7 +205,8 @@ class Batcher:
 
         self.f, self.cfg, self.rng, self.torch = frames, cfg, rng, torch
         succ = frames.success.numpy() > 0.5
-        self.pos_idx, self.neg_idx = np.flatnonzero(succ), np.flatnonzero(~succ)
+        self.pos_idx = np.flatnonzero(succ)
+        self.neg_idx = np.flatnonzero(~succ & (steps_to_success(frames) > cfg.detect_ignore_before_success))
         self.traj_idx = np.flatnonzero(frames.traj)  # global / local samples imitate these frames only
         self.t0_idx = np.flatnonzero((frames.t == 0) & frames.traj)
         self.recovery_idx = np.flatnonzero(frames.traj & frames.online)
