@@ -2,8 +2,9 @@
 × seeds, in parallel worker processes (or on a Ray cluster), resumable.
 
 Every finished episode is appended to ``DIR/episodes.jsonl`` at once, so an interrupted evaluation
-resumes where it stopped (jobs are keyed by their full config hash and the hash of the checkpoint their
-planner loads, so a retrained or replaced checkpoint is never credited with the old one's episodes). ``DIR/eval.json`` holds one cell
+resumes where it stopped (jobs are keyed by their full config hash, the hash of the task code and the hash of
+the checkpoint their planner loads, so a retrained or replaced checkpoint, or a changed oracle script, is never
+credited with the old episodes). ``DIR/eval.json`` holds one cell
 per task × planner × mode × perturbation × robot × controller × IK × sweep value with success rate and
 standard error, plus failure-detector metrics; ``DIR/eval.md`` has the paper's tables (Table 1: per
 suite success ± s.e.; Table 4: ablation of the planning modes).
@@ -46,7 +47,21 @@ class Job:
         c = self.cfg
         ck = checkpoint_digest(c)
         return "|".join(map(str, (c.task, c.planner, c.supervisor.mode, self.perturb, c.robot, c.controller,
-                                  c.ik, self.sweep, c.seed, c.digest(), *([ck] if ck else []))))
+                                  c.ik, self.sweep, c.seed, c.digest(), task_code_digest(), *([ck] if ck else []))))
+
+
+@functools.lru_cache(maxsize=1)
+def task_code_digest() -> str:
+    """Hash of the task package's source (layouts, success predicates, oracle scripts): an episode run with
+    other task code is not credited on resume (e.g. the oracle's hook clearance changed)."""
+    import hashlib
+
+    from tcot_hybrid import tasks
+
+    h = hashlib.sha256()
+    for f in sorted(Path(tasks.__file__).parent.glob("*.py")):
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:16]
 
 
 def checkpoint_digest(cfg: RunConfig) -> str | None:

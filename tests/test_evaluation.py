@@ -80,6 +80,17 @@ def test_job_key_follows_the_checkpoint_file(tmp_path):
     assert key("oracle", None).count("|") == before.count("|") - 1  # no checkpoint, no hash in the key
 
 
+def test_job_key_follows_the_task_code(monkeypatch):
+    """An episode run with other task code (e.g. a changed oracle script) must not be credited on resume."""
+    from tcot_hybrid import evaluation
+
+    (job,) = make_jobs(RunConfig(), tasks=["tool_pull_cube_with_stick"], planners=["oracle"], modes=["global"],
+                       robots=["panda"], controllers=["computed_torque"], iks=["mink"], episodes=1, seed_start=1000)
+    assert evaluation.task_code_digest() in job.key.split("|")
+    monkeypatch.setattr(evaluation, "task_code_digest", lambda: "other task code")
+    assert job.key.split("|")[-1] == "other task code"
+
+
 def test_longest_tasks_are_scheduled_first():
     from tcot_hybrid.tasks import make_task
 
