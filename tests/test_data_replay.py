@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.data.collect import collect
-from tcot_hybrid.data.replay import LabelReplayPlanner, ReplayConfig, cmd_replay, replay_file
+from tcot_hybrid.data.replay import LabelReplayPlanner, ReplayConfig, cmd_replay, markdown, replay_file
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation
 from tcot_hybrid.run_config import RunConfig
@@ -66,3 +66,14 @@ def test_bad_inputs_are_named(tool_demos):
         replay_file(tool_demos, tasks=["goal_cube_on_plate"], workers=1, progress=False)
     with pytest.raises(ConfigError, match="--n-g must be >= 2, got 1"):
         cmd_replay(["--data", str(tool_demos), "--n-g", "1"])
+    with pytest.raises(ConfigError, match="no <!-- replay:start -->"):
+        cmd_replay(["--data", str(tool_demos), "--readme", str(tool_demos.parent / "missing.md")])
+
+
+def test_markdown_names_the_command_and_every_task():
+    report = {"command": "tcot replay --data d.hdf5", "data": "d.hdf5", "L_g": 51, "n_g": 4, "noise_px": 0.0,
+              "noise_z_m": 0.0, "success_rate": 0.5, "demos": [{}, {}],
+              "per_task": {"a": {"demos": 1, "successes": 1, "success_rate": 1.0},
+                           "b": {"demos": 1, "successes": 0, "success_rate": 0.0}}}
+    md = markdown(report)
+    assert "`tcot replay --data d.hdf5`" in md and "| a | 1 | 1 (100%) |" in md and "| b | 1 | 0 (0%) |" in md

@@ -4,10 +4,9 @@ The learned planner is trained to reproduce the eq.-4 window at t = 0 (``L_g // 
 steps of the demo's TCP track) and its frozen-global success is bounded by how well that label itself
 solves the task when run through the real motion stack (lift → IK → Ruckig → controller). A time-sampled
 track cuts corners: the hook of the tool task came down on the cube in every replay while its clearance
-was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaussian noise on every point
-(the size of the network's errors):
+was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaussian noise on every point:
 
-    tcot replay --data data/heldout_panda.hdf5 --noise-px 1.5 --noise-z-m 0.008 --out docs/planner-eval/replay.json
+    tcot replay --data data/heldout_panda.hdf5 --out docs/planner-eval/replay.json --readme docs/planner.md
 
 Each demo is re-run with its own seed, so the scene is the one that was recorded.
 """
@@ -139,6 +138,16 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
             "wall_s": round(time.perf_counter() - t0, 1)}
 
 
+def markdown(report: dict) -> str:
+    """Per-task table of a replay report, with the command that wrote it."""
+    lines = [f"Measured by `{report['command']}` ({len(report['demos'])} demos of `{report['data']}`, global window "
+             f"L_g = {report['L_g']}, n_g = {report['n_g']}, noise {report['noise_px']} px / {report['noise_z_m']} m):",
+             "", "| task | demos | label replay succeeded |", "|---|---|---|"]
+    lines += [f"| {t} | {c['demos']} | {c['successes']} ({c['success_rate']:.0%}) |" for t, c in report["per_task"].items()]
+    lines += ["", f"All: {report['success_rate']:.3f}."]
+    return "\n".join(lines) + "\n"
+
+
 def cmd_replay(argv: list[str]) -> int:
     """``tcot replay --data FILE``: success of each demo's own t = 0 global label run as a frozen plan."""
     p = argparse.ArgumentParser(prog="tcot replay", description=(
@@ -153,7 +162,13 @@ def cmd_replay(argv: list[str]) -> int:
     p.add_argument("--noise-seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, help="write the report as JSON here")
+    p.add_argument("--readme", type=Path, help="also write the table into this Markdown file's "
+                   "<!-- replay:start/end --> section")
     args = p.parse_args(argv)
+    from tcot_hybrid.bench import has_readme_section, update_readme_section
+
+    if args.readme is not None and not has_readme_section(args.readme, "replay"):
+        raise ConfigError(f"--readme {args.readme} has no <!-- replay:start --> ... <!-- replay:end --> section")
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     if args.n_g < 2:  # TrajectoryWindowConfig needs some local stride n_l < n_g; the replay uses no local window
@@ -170,4 +185,6 @@ def cmd_replay(argv: list[str]) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1) + "\n")
         print(f"-> {args.out}")
+    if args.readme is not None:
+        update_readme_section(args.readme, "replay", markdown(report))
     return 0
