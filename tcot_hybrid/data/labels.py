@@ -25,8 +25,9 @@ class TrajectoryWindowConfig:
     """Which demo samples make up a global / local trajectory label. Units: planner steps (plan_dt each).
 
     L_g: points in a global trajectory, odd (the middle point is the current step). Up: longer horizon
-         both ways; 51 with n_g = 4 spans ±100 steps = ±10 s, longer than the longest demo (~9-10 s),
-         so the global plan always reaches the end of the task.
+         both ways; 51 with n_g = 4 spans ±100 steps = ±10 s. Most long-suite demos end before step 100;
+         the slowest run to ~113 steps, and in 3 of 150 the last release comes after step 100, so their
+         t = 0 label stops short of it (`tcot replay` measures what the labels achieve).
     n_g: stride between global points [steps]. Down: denser global plans. Keep n_g <= 4 so at least one
          point falls inside every 0.5 s (5-step) gripper pause, where the gripper bit flips.
     L_l: local trajectory length: L_l + 1 points from the current step on. Up: longer local horizon.
