@@ -8,7 +8,8 @@ was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaus
 
     tcot replay --data data/heldout_panda.hdf5 --out docs/planner-eval/replay.json --readme docs/planner.md
 
-Each demo is re-run with its own seed, so the scene is the one that was recorded.
+Each demo is re-run with its own seed, robot, controller, IK backend, timing and camera (recorded in the file),
+so the scene is the one that was recorded; every other motion-stack setting is the default.
 """
 from __future__ import annotations
 
