@@ -1090,7 +1090,9 @@ ABORT_SCRIPT = textwrap.dedent("""
             self.calls = getattr(self, "calls", 0) + 1
             if self.calls == 3:  # mid-episode: two plans followed already
                 if MODE == "sigint":
-                    os.kill(os.getpid(), signal.SIGINT)  # KeyboardInterrupt, as from Ctrl-C
+                    # to this thread (os.kill may reach another thread first and the RuntimeError win the race
+                    # on a loaded machine): KeyboardInterrupt, as from Ctrl-C
+                    signal.raise_signal(signal.SIGINT)
                 raise RuntimeError("planner bug")
             return super().plan(obs, mode=mode)
 
