@@ -1082,6 +1082,8 @@ ABORT_SCRIPT = textwrap.dedent("""
     from tcot_hybrid.planners.oracle import OraclePlanner
 
     MODE = None
+    # a shell that starts the tests in the background ignores SIGINT; Ctrl-C's handler is what is tested here
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     class Failing(OraclePlanner):
         name = "failing"
