@@ -33,12 +33,12 @@ def test_tool_label_replays_successfully(tool_demos):
 
 def test_noise_is_seeded_and_changes_the_plan(tool_demos):
     from tcot_hybrid.data.dataset import open_demos
-    from tcot_hybrid.data.labels import track_from_arrays
+    from tcot_hybrid.data.labels import TRACK_KEYS, track_from_arrays
     from tcot_hybrid.episode import build_stack
 
     with open_demos(tool_demos) as f:
         name = f.demos[0]
-        tr = track_from_arrays(f.read(name, ["obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed"]))
+        tr = track_from_arrays(f.read(name, TRACK_KEYS))
     camera = build_stack(RunConfig(task=TOOL)).camera
     obs = Observation(step=0, image=None, depth_m=None, q=np.zeros(7), gripper_closed=False, instruction="")
 

@@ -144,9 +144,12 @@ def make_track(uv_px, z_m, gripper_closed) -> Track:
     return Track(uv, z, g)
 
 
-def track_from_arrays(arrays: dict, *, uv_key: str = "obs/eef_uv_px") -> Track:
+TRACK_KEYS = ("obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed")  # what a track is read from
+
+
+def track_from_arrays(arrays: dict, *, uv_key: str = TRACK_KEYS[0]) -> Track:
     """Track of a demo read with :meth:`DemoFile.read`: exact TCP pixel (or ``uv_key``), TCP height, gripper."""
-    return make_track(arrays[uv_key], arrays["obs/robot0_eef_pos"][:, 2], arrays["obs/robot0_gripper_closed"])
+    return make_track(arrays[uv_key], arrays[TRACK_KEYS[1]][:, 2], arrays[TRACK_KEYS[2]])
 
 
 def _gather(track: Track, idx: np.ndarray) -> WindowLabels:

@@ -24,7 +24,7 @@ import numpy as np
 
 from tcot_hybrid.config import require_nonnegative
 from tcot_hybrid.data.dataset import open_demos
-from tcot_hybrid.data.labels import TrajectoryWindowConfig, global_indices, track_from_arrays
+from tcot_hybrid.data.labels import TRACK_KEYS, TrajectoryWindowConfig, global_indices, track_from_arrays
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation, Planner
 from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
@@ -80,7 +80,7 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
 
     with open_demos(path) as f:
         info, env = f.info(name), dict(f.env_args)
-        track = track_from_arrays(f.read(name, ["obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed"]))
+        track = track_from_arrays(f.read(name, TRACK_KEYS))
     base = RunConfig()
     cfg = RunConfig(task=info.task, seed=info.seed, robot=info.robot, controller=env["controller"], ik=env["ik"],
                     timing=TimingConfig(sim_dt=env["sim_dt"], ctrl_dt=env["ctrl_dt"], plan_dt=env["plan_dt"]),
