@@ -176,8 +176,12 @@ def test_example_train_configs_load_and_chain():
     round2 = load_train_config(root / "train_stage2_round2.yaml")
     assert stage2.init == "runs/train/stage1.safetensors" and round2.init == stage2.out
     assert set(stage2.online_data) < set(round2.online_data)  # round 2 adds data, drops none
-    round3 = load_train_config(root / "train_stage2_round3.yaml")
-    assert round3.init == round2.out and set(round2.online_data) < set(round3.online_data)
+    round4 = load_train_config(root / "train_stage2_round4.yaml")
+    assert round4.init == round2.out and set(round2.online_data) < set(round4.online_data)
+    # the shipped checkpoint is the last round's output, with that round's config
+    shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
+    assert shipped["train_config"]["out"] == round4.out
+    assert shipped["model"]["readout_radius_cells"] == round4.model.readout_radius_cells
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
