@@ -178,10 +178,12 @@ def test_example_train_configs_load_and_chain():
     assert set(stage2.online_data) < set(round2.online_data)  # round 2 adds data, drops none
     round4 = load_train_config(root / "train_stage2_round4.yaml")
     assert round4.init == round2.out and set(round2.online_data) < set(round4.online_data)
+    round5 = load_train_config(root / "train_stage2_round5.yaml")
+    assert round5.init == round4.out and set(round5.online_data) == set(round4.online_data)
     # the shipped checkpoint is the last round's output, with that round's config
     shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
-    assert shipped["train_config"]["out"] == round4.out
-    assert shipped["model"]["readout_radius_cells"] == round4.model.readout_radius_cells
+    assert shipped["train_config"]["out"] == round5.out
+    assert shipped["model"]["readout_radius_cells"] == round5.model.readout_radius_cells
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
