@@ -34,6 +34,12 @@ class ExecutorConfig:
                       grasps, more waiting.
     reach_timeout_s:  after the reference has arrived, wait at most this long for the TCP [s]; then
                       go on anyway and log a ``slow_arrival`` event.
+    stop_match_m:     a replan's waypoint within this distance of the stop the arm is waiting at is that
+                      stop re-aimed, and the wait (``reach_timeout_s``) goes on [m].
+                      Learned local plans move a stop by 1-4 cm from one replan to the next; with a match
+                      radius of ``reach_tol_m`` every replan restarted the wait, and GLSR hovered above a drawer
+                      handle for the rest of the episode without closing the gripper. Down: re-aimed stops
+                      restart the wait; up: a stop that really moved (e.g. the object did) is waited at less.
     gripper_settle_s: hold still this long after switching the gripper [s]. Up: firmer grasps before
                       moving; down: faster episodes.
     resync_tol_rad:   if the reference and the measured joints differ by more than this when a new plan
@@ -50,6 +56,7 @@ class ExecutorConfig:
     blend_time_s: float = 0.15
     reach_tol_m: float = 0.008
     reach_timeout_s: float = 1.0
+    stop_match_m: float = 0.05
     gripper_settle_s: float = 0.5
     resync_tol_rad: float = 0.01
     reflex_tracking_rad: float | None = 0.25
@@ -58,6 +65,7 @@ class ExecutorConfig:
         for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s"):
             require_nonnegative(name, getattr(self, name))
         require_positive("reach_tol_m", self.reach_tol_m)
+        require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
         if self.reflex_tracking_rad is not None:  # None (YAML null) switches the reflex off
             require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
@@ -125,10 +133,10 @@ class MotionExecutor:
         return i == len(self.points) - 1 or bool(self.grip[i]) != self.sim.gripper_closed_cmd()
 
     def _activate(self, i: int) -> None:
-        # A replan that keeps heading for the stop point we are already waiting at keeps the arrival
-        # clock: otherwise replanning faster than reach_timeout_s would wait there forever.
+        # A replan that keeps heading for the stop we are already waiting at keeps the arrival clock:
+        # otherwise replanning faster than reach_timeout_s would wait there forever.
         keep = (self._arrived_at is not None and self._waiting_at is not None
-                and np.linalg.norm(self.points[i] - self._waiting_at) <= self.config.reach_tol_m)
+                and np.linalg.norm(self.points[i] - self._waiting_at) <= self.config.stop_match_m)
         self.index, self.phase = i, "move"
         if not keep:
             self._arrived_at = self._waiting_at = None
@@ -174,6 +182,7 @@ class MotionExecutor:
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
+            self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
             self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
         else:
             self.phase = "done"

@@ -129,6 +129,15 @@ def test_margin_larger_than_joint_range_is_refused(backend):
         make_ik(backend, spec("panda"), IKConfig(limit_margin_rad=2.0))
 
 
+def test_margin_larger_than_joint_range_is_refused_before_a_run_builds_anything():
+    from tcot_hybrid.episode import validate_names
+    from tcot_hybrid.run_config import RunConfig
+
+    with pytest.raises(ConfigError, match=r"limit_margin_rad = 2.0 leaves no range for joints \['joint2'"):
+        validate_names(RunConfig(ik_params=IKConfig(limit_margin_rad=2.0)))
+    validate_names(RunConfig(ik_params=IKConfig(limit_margin_rad=0.2)))
+
+
 def test_collision_avoidance_is_refused_by_pinocchio_backend():
     with pytest.raises(ConfigError, match="collision_avoidance"):
         make_ik("pinocchio", spec("panda"), IKConfig(collision_avoidance=True))

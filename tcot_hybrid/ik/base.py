@@ -149,6 +149,28 @@ def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
     return float(np.arctan2(s, c))
 
 
+def joint_bounds(spec: RobotSpec, cfg: IKConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The joint range IK may use: the robot's limits minus ``cfg.limit_margin_rad`` [rad]. ConfigError when the
+    margin leaves a joint no range or puts the home pose outside (checked before a run builds anything)."""
+    q_min = np.asarray(spec.q_min, dtype=float)
+    q_max = np.asarray(spec.q_max, dtype=float)
+    lower, upper = q_min + cfg.limit_margin_rad, q_max - cfg.limit_margin_rad
+    if np.any(lower >= upper):
+        bad = [spec.arm_joints[i] for i in np.flatnonzero(lower >= upper)]
+        raise ConfigError(
+            f"limit_margin_rad = {cfg.limit_margin_rad} leaves no range for joints {bad} of robot "
+            f"{spec.name!r}; use a margin below half the smallest joint range "
+            f"({0.5 * float(np.min(q_max - q_min)):.4g} rad)"
+        )
+    home = np.asarray(spec.home_q, dtype=float)
+    if np.any(home < lower) or np.any(home > upper):
+        raise ConfigError(
+            f"home_q {home.tolist()} of robot {spec.name!r} is not inside its joint limits minus "
+            f"limit_margin_rad = {cfg.limit_margin_rad}; lower the margin"
+        )
+    return lower, upper
+
+
 class IKSolver(ABC):
     """One IK backend. Subclasses implement :meth:`_solve`; :meth:`solve` validates the inputs.
 
@@ -165,26 +187,9 @@ class IKSolver(ABC):
             raise ConfigError(f"config must be an IKConfig, got {type(self.config).__name__}")
         cfg = self.config
         self.dof = int(spec.dof)
-        q_min = np.asarray(spec.q_min, dtype=float)
-        q_max = np.asarray(spec.q_max, dtype=float)
-        v_max = np.asarray(spec.v_max, dtype=float)
-        self.lower = q_min + cfg.limit_margin_rad
-        self.upper = q_max - cfg.limit_margin_rad
-        if np.any(self.lower >= self.upper):
-            bad = [spec.arm_joints[i] for i in np.flatnonzero(self.lower >= self.upper)]
-            raise ConfigError(
-                f"limit_margin_rad = {cfg.limit_margin_rad} leaves no range for joints {bad} of robot "
-                f"{spec.name!r}; use a margin below half the smallest joint range "
-                f"({0.5 * float(np.min(q_max - q_min)):.4g} rad)"
-            )
-        self.max_step = v_max * cfg.velocity_scale * cfg.step_dt_s
-        home = np.asarray(spec.home_q, dtype=float)
-        if np.any(home < self.lower) or np.any(home > self.upper):
-            raise ConfigError(
-                f"home_q {home.tolist()} of robot {spec.name!r} is not inside its joint limits minus "
-                f"limit_margin_rad = {cfg.limit_margin_rad}; lower the margin"
-            )
-        self.home_q = home
+        self.lower, self.upper = joint_bounds(spec, cfg)
+        self.max_step = np.asarray(spec.v_max, dtype=float) * cfg.velocity_scale * cfg.step_dt_s
+        self.home_q = np.asarray(spec.home_q, dtype=float)
 
     # -- public API ---------------------------------------------------------------------------------
 
