@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import itertools
 import json
 import math
@@ -65,8 +66,10 @@ def task_code_digest() -> str:
 
 
 def checkpoint_digest(cfg: RunConfig) -> str | None:
-    """Hash of the checkpoint file the job's planner will load (the shipped default or ``--checkpoint``);
-    None for planners without one, or when it cannot be resolved (the episode then records why)."""
+    """Hash of the checkpoint the job's planner will load (the shipped default or ``--checkpoint``): its weights
+    and its JSON metadata, which holds inference settings too (e.g. ``model.readout_radius_cells``). None for
+    planners without one, or when it cannot be resolved (the episode then records why)."""
+    from tcot_hybrid.learning.checkpoint import meta_path
     from tcot_hybrid.planners import planner_checkpoint
 
     try:
@@ -75,8 +78,12 @@ def checkpoint_digest(cfg: RunConfig) -> str | None:
         return None
     if path is None or not path.is_file():
         return None
-    st = path.stat()
-    return _digest_of(str(path.resolve()), st.st_mtime_ns, st.st_size)
+    parts = []
+    for f in (path, meta_path(path)):
+        if f.is_file():
+            st = f.stat()
+            parts.append(_digest_of(str(f.resolve()), st.st_mtime_ns, st.st_size))
+    return parts[0] if len(parts) == 1 else hashlib.sha256("".join(parts).encode()).hexdigest()[:16]
 
 
 @functools.lru_cache(maxsize=64)

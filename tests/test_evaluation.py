@@ -75,6 +75,12 @@ def test_job_key_follows_the_checkpoint_file(tmp_path):
     before = key()
     ck.write_bytes(b"retrained weights, same path")
     assert key() != before
+    weights_only = key()
+    meta = tmp_path / "planner.json"
+    meta.write_text('{"model": {"readout_radius_cells": 0}}')
+    with_meta = key()
+    meta.write_text('{"model": {"readout_radius_cells": 2}}')  # an inference setting lives in the metadata
+    assert len({weights_only, with_meta, key()}) == 3
     shipped = key(checkpoint=None)
     assert shipped != key() and shipped.count("|") == key().count("|")  # the shipped default is hashed too
     assert key("oracle", None).count("|") == before.count("|") - 1  # no checkpoint, no hash in the key
