@@ -81,6 +81,28 @@ def test_local_readout_picks_one_mode():
     assert abs(local[0] - (4 * 4 + 1.5)) < 0.01 and abs(local[1] - (8 * 4 + 1.5)) < 0.01
 
 
+def test_window_readout_matches_a_masked_soft_argmax_also_at_the_border():
+    from tcot_hybrid.learning.model import window_readout
+
+    g = torch.Generator().manual_seed(0)
+    h, w, r = 8, 12, 2
+    logits = torch.randn(2, 5, h * w, generator=g) * 3
+    logits[0, 0, 0] = 50.0  # peak in a corner: the window is cut to 3 x 3 cells
+    logits[1, 1, h * w - 2] = 50.0  # near the opposite corner
+    values = torch.randn(2, 5, h * w, generator=g)
+    prob = torch.softmax(logits, -1)
+    u, v, z = window_readout(prob, values, h, w, r)
+    cv, cu = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
+    cv, cu = cv.flatten(), cu.flatten()
+    peak = prob.argmax(-1)
+    near = ((cv - (peak // w)[..., None]).abs() <= r) & ((cu - (peak % w)[..., None]).abs() <= r)
+    pm = prob * near
+    pm = pm / pm.sum(-1, keepdim=True)
+    assert torch.allclose(u, (pm * cu).sum(-1), atol=1e-5) and torch.allclose(v, (pm * cv).sum(-1), atol=1e-5)
+    assert torch.allclose(z, (pm * values).sum(-1), atol=1e-5)
+    assert u[0, 0] < 0.01 and v[0, 0] < 0.01 and abs(u[1, 1] - (w - 2)) < 0.01 and abs(v[1, 1] - (h - 1)) < 0.01
+
+
 def test_model_config_validation():
     with pytest.raises(ConfigError, match="model.kind"):
         ModelConfig(kind="vla")

@@ -245,20 +245,41 @@ def test_online_frames_detect_everywhere_imitate_only_recoveries(online_file, de
     assert abs(share - (0.6 + 0.4 * natural)) < 0.06
 
 
-def test_stage2_finetune_from_checkpoint_with_online_data(demo_file, online_file, tmp_path):
+@pytest.fixture(scope="module")
+def extra_demo_file(tmp_path_factory, camera):
+    path = tmp_path_factory.mktemp("extra") / "extra.hdf5"
+    make_demo_file(path, camera, seeds=range(40, 46), T=24)
+    return path
+
+
+def test_extra_demos_keep_every_kth_frame_with_whole_track_labels(extra_demo_file, demo_file):
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    kw = dict(windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)
+    full = load_frames(extra_demo_file, "train", vocab, **kw)
+    sparse = load_frames(extra_demo_file, "train", vocab, frame_stride=4, **kw)
+    assert sparse.demos == full.demos and set(sparse.t) == set(range(0, 24, 4))  # t = 0 always kept
+    rows = np.flatnonzero(full.t % 4 == 0)
+    for name in ("g_uv", "g_z", "g_grip", "l_uv", "d_delta", "success"):  # labels from the whole track
+        assert torch.equal(getattr(sparse, name), getattr(full, name)[rows]), name
+    assert np.array_equal(sparse.demo, full.demo[rows]) and sparse.traj.all() and not sparse.online.any()
+
+
+def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, extra_demo_file, online_file, tmp_path):
     first = train(_cfg(demo_file, tmp_path / "s1.safetensors", max_epochs=1, stage1_epochs=1),
                   progress=False, log=lambda *_: None)
     cfg = _cfg(demo_file, tmp_path / "s2.safetensors", max_epochs=1, stage1_epochs=0, init=str(first.checkpoint),
+               extra_data=[str(extra_demo_file)], extra_frame_stride=4,  # a list, as YAML gives it
                online_data=(str(online_file),), epoch_samples=64)
     logs = []
     res = train(cfg, progress=False, log=logs.append)
     assert any("initialised from" in line for line in logs)
+    assert any(line.startswith(f"extra data {extra_demo_file}: 5 train demos / 30 frames") for line in logs)
     lines = [json.loads(x) for x in (tmp_path / "s2.metrics.jsonl").read_text().splitlines()]
     assert lines[0]["stage"] == 2 and lines[0]["train"]["detect"] > 0
     assert lines[0]["val"]["detect_frames"] > lines[0]["val"]["frames"]  # failed rollouts scored for detection
     meta = load_checkpoint(res.checkpoint).meta
     assert meta["online_data"] == [str(online_file)] and meta["init"] == str(first.checkpoint)
-    assert "+" in meta["data_hash"]
+    assert meta["extra_data"] == [str(extra_demo_file)] and meta["data_hash"].count("+") == 2
     with pytest.raises(ConfigError, match="init checkpoint .* has model"):
         train(_cfg(demo_file, tmp_path / "s3.safetensors", max_epochs=1, init=str(first.checkpoint),
                    model=ModelConfig(width=16)), progress=False, log=lambda *_: None)

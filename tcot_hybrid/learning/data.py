@@ -74,9 +74,10 @@ def file_hash(path: str | Path, *, chunk: int = 1 << 22) -> str:
 
 def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                 max_tokens: int, direct_horizon: int, max_demos: int | None = None,
-                successful_only: bool = True) -> FrameSet:
+                successful_only: bool = True, frame_stride: int = 1) -> FrameSet:
     """Read split ``train``/``valid`` (or ``all``: both) of demo file ``path`` into memory with every label
     computed. Only successful demos carry trajectory labels worth imitating; ``successful_only`` drops the rest.
+    ``frame_stride`` keeps every k-th frame of each demo (t = 0 always; labels still come from the whole track).
     """
     with open_demos(path) as f:
         names = f.mask("train") + f.mask("valid") if split == "all" else f.mask(split)
@@ -88,7 +89,7 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
         if not names:
             raise DatasetError(f"demo file {path}: split {split!r} has no usable demos")
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
-                            keep=lambda info, T: (np.ones(T, bool), np.ones(T, bool)), online=False)
+                            keep=lambda info, T: (np.arange(T) % frame_stride == 0, np.ones(T, bool)), online=False)
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,

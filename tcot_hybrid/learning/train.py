@@ -79,6 +79,11 @@ class TrainConfig:
     """One training run. Stored as YAML/TOML; every field is also a ``tcot train`` flag.
 
     data:            demonstration file (``tcot collect`` output) [path]
+    extra_data:      further demonstration files (``tcot collect`` output, same robot and camera), e.g. more seeds
+                     of the tasks a first-plan-at-t = 0 global plan gets wrong most (long, tool); split by seed
+                     like ``data`` [paths]
+    extra_frame_stride: keep every k-th frame of an ``extra_data`` demo (every t = 0 frame is kept: k divides 0).
+                     Up: less memory; the t = 0 scenes, where frozen global plans are made, stay complete.
     online_data:     further files of online episodes (``tcot collect --planner learned`` rollouts, oracle
                      recoveries under ``--perturb``): failure-detection frames from every episode, labelled by
                      the success predicate (paper eq. 7), and recovery trajectories from successful oracle
@@ -127,6 +132,8 @@ class TrainConfig:
     """
 
     data: str = "data/demos_panda.hdf5"
+    extra_data: tuple[str, ...] = ()
+    extra_frame_stride: int = 1
     online_data: tuple[str, ...] = ()
     online_frame_stride: int = 2
     init: str | None = None
@@ -161,11 +168,13 @@ class TrainConfig:
         require_choice("kind", self.kind, ("trajectory", "direct"))
         for name in ("seed",):
             require_int(name, getattr(self, name), minimum=0)
-        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride"):
+        for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride",
+                     "extra_frame_stride"):
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
         require_int("detect_ignore_before_success", self.detect_ignore_before_success, minimum=0)
-        object.__setattr__(self, "online_data", tuple(str(p) for p in self.online_data))  # YAML gives a list
+        for name in ("extra_data", "online_data"):  # YAML gives a list
+            object.__setattr__(self, name, tuple(str(p) for p in getattr(self, name)))
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
         for name in ("global_t0_frac", "recovery_frac"):
@@ -474,8 +483,16 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     va = load_frames(cfg.data, "valid", vocab, **load)
     log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
-    data_files = [cfg.data, *cfg.online_data]
+    data_files = [cfg.data, *cfg.extra_data, *cfg.online_data]
     trs, vas = [tr], [va]
+    for path in cfg.extra_data:
+        _check_same_env(env, env_of(path)[0], path, cfg.data)
+        ex_tr, ex_va = (load_frames(path, split, vocab, frame_stride=cfg.extra_frame_stride, **load)
+                        for split in ("train", "valid"))
+        log(f"extra data {path}: {len(ex_tr.demos)} train demos / {len(ex_tr)} frames, {len(ex_va.demos)} valid "
+            f"demos / {len(ex_va)} frames (every {cfg.extra_frame_stride}. frame)")
+        trs.append(ex_tr)
+        vas.append(ex_va)
     for path in cfg.online_data:
         _check_same_env(env, env_of(path)[0], path, cfg.data)
         on_tr, on_va = (load_online_frames(path, split, vocab, frame_stride=cfg.online_frame_stride, **load)
@@ -576,7 +593,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         "robot": env["robot"], "camera": camera_meta(camera), "vocabulary": list(vocab.tokens),
         "windows": dataclasses.asdict(cfg.windows), "direct_horizon": cfg.direct_horizon,
         "max_unknown_fraction": cfg.max_unknown_fraction,
-        "data_hash": data_hash, "data_file": str(cfg.data), "online_data": list(cfg.online_data),
+        "data_hash": data_hash, "data_file": str(cfg.data), "extra_data": list(cfg.extra_data),
+        "online_data": list(cfg.online_data),
         "init": cfg.init, "data_env_config_hash": env.get("config_hash"),
         "train_demos": len(tr.demos), "train_frames": len(tr),
         "metrics": {"best_epoch": best_epoch, **best_metrics}, "train_config": _jsonable(cfg),
@@ -592,12 +610,12 @@ DETECT_SCORE_PX = 5.0  # stage 2 validation score: 1 - AUROC of the detector cos
 
 
 def _check_same_env(env: dict, other: dict, path: str, data: str) -> None:
-    """Online data must come from the same robot, camera and timing as the demonstrations."""
+    """Extra and online data must come from the same robot, camera and timing as the demonstrations."""
     from tcot_hybrid.data.dataset import env_difference
 
     diff = env_difference(other, env, ("robot", "camera", "width", "height", "plan_dt"))
     if diff:
-        raise ConfigError(f"online data {path!r} has {diff} (the demonstrations {data!r})")
+        raise ConfigError(f"data file {path!r} has {diff} (the demonstrations {data!r})")
 
 
 def _load_init(model, path: str, vocab, log) -> None:
