@@ -40,11 +40,16 @@ planner: setup
 	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage2.safetensors --mode glsr \
 		--perturb none,$(PERTURBS) --episodes-per-task 3 --seed-start 300 --out data/online_learned_glsr.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round2.yaml
-	# third online round: the round-2 planner's GLSR episodes; round 4 at lr 1e-3, round 5 (shipped) at 3e-4
+	# third online round: the round-2 planner's GLSR episodes; round 4 at lr 1e-3, round 5 at 3e-4
 	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage2_round2.safetensors --mode glsr \
 		--perturb none,$(PERTURBS) --episodes-per-task 2 --seed-start 400 --out data/online_learned_glsr_round2.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round4.yaml
 	$(BIN)/tcot train --config examples/configs/train_stage2_round5.yaml
+	# more scenes (seeds 600-999) for the tasks whose frozen t = 0 global plan fails most; round 6 is shipped
+	$(BIN)/tcot collect --episodes-per-task 150 --seed-start 600 --out data/demos_extra_panda.hdf5
+	$(BIN)/tcot collect --suite long --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
+	$(BIN)/tcot collect --suite tool --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
+	$(BIN)/tcot train --config examples/configs/train_stage2_round6.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
 clean:

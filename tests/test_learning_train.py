@@ -180,10 +180,13 @@ def test_example_train_configs_load_and_chain():
     assert round4.init == round2.out and set(round2.online_data) < set(round4.online_data)
     round5 = load_train_config(root / "train_stage2_round5.yaml")
     assert round5.init == round4.out and set(round5.online_data) == set(round4.online_data)
+    round6 = load_train_config(root / "train_stage2_round6.yaml")
+    assert round6.init == round5.out and set(round6.online_data) == set(round5.online_data)
+    assert round6.extra_data == ("data/demos_extra_panda.hdf5",) and round6.data == round5.data
     # the shipped checkpoint is the last round's output, with that round's config
     shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
-    assert shipped["train_config"]["out"] == round5.out
-    assert shipped["model"]["readout_radius_cells"] == round5.model.readout_radius_cells
+    assert shipped["train_config"]["out"] == round6.out
+    assert shipped["model"]["readout_radius_cells"] == round6.model.readout_radius_cells
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
