@@ -83,7 +83,7 @@ def checkpoint_digest(cfg: RunConfig) -> str | None:
         if f.is_file():
             st = f.stat()
             parts.append(_digest_of(str(f.resolve()), st.st_mtime_ns, st.st_size))
-    return parts[0] if len(parts) == 1 else hashlib.sha256("".join(parts).encode()).hexdigest()[:16]
+    return hashlib.sha256("".join(parts).encode()).hexdigest()[:16]
 
 
 @functools.lru_cache(maxsize=64)

@@ -250,20 +250,17 @@ class PlannerNet(nn.Module):
             logits, heights = maps[:, :n], maps[:, n:]
             b, _, h, w = logits.shape
             prob = torch.softmax(logits.flatten(2), dim=-1)  # (B, n, h*w)
-            s = cfg.image_px / w
             r = cfg.readout_radius_cells
             if r > 0 and not self.training:  # mode-seeking read-out: only the cells around the peak
                 u, v, z = window_readout(prob, heights.flatten(2), h, w, r)
-                u, v = (u + 0.5) * s - 0.5, (v + 0.5) * s - 0.5
-            else:
-                us = (torch.arange(w, device=x.device, dtype=torch.float32) + 0.5) * s - 0.5
-                vs = (torch.arange(h, device=x.device, dtype=torch.float32) + 0.5) * s - 0.5
+            else:  # expected cell under the whole map
                 p2 = prob.view(b, n, h, w)
-                u = (p2.sum(2) * us).sum(-1)
-                v = (p2.sum(3) * vs).sum(-1)
+                u = (p2.sum(2) * torch.arange(w, device=x.device, dtype=torch.float32)).sum(-1)
+                v = (p2.sum(3) * torch.arange(h, device=x.device, dtype=torch.float32)).sum(-1)
                 z = (prob * heights.flatten(2)).sum(-1)
-            res.update(uv_px=torch.stack([u, v], dim=-1), z_m=cfg.z_offset_m + cfg.z_scale_m * z,
-                       heat_logits=logits)
+            s = cfg.image_px / w  # cell c covers pixels c*s .. (c+1)*s: its centre is pixel (c + 0.5) * s - 0.5
+            uv = (torch.stack([u, v], dim=-1) + 0.5) * s - 0.5
+            res.update(uv_px=uv, z_m=cfg.z_offset_m + cfg.z_scale_m * z, heat_logits=logits)
         else:
             out = self.fc(f16).float().view(-1, n, 3)
             half = cfg.image_px / 2
