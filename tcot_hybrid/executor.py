@@ -51,6 +51,15 @@ class ExecutorConfig:
                       free. Event ``tracking_reflex``; the supervisor decides what next (GLSR and local
                       modes replan; a frozen global plan is not resumed, the arm holds). Nominal tracking
                       stays below 0.08 rad (docs/eval-*); None = off.
+    transit_min_horizontal_m, transit_min_vertical_m: a plan segment that moves more than both sideways and
+                      up or down is split at a corner: move over, then lower (or raise, then move over), the
+                      sideways move at the higher end's height. Learned global plans are samples of a timed
+                      track, 0.4 s apart; a straight line between two of them cuts the corner of the
+                      demonstration's lower-after-moving-over, and a carried cube swept diagonally into the
+                      drawer's far wall and pushed the drawer shut (docs/planner.md, "Square transits").
+                      Oracle plans are never split: their points are at most ``OracleConfig.spacing_m``
+                      (4 cm) apart. Down: more segments squared, more time spent; up: fewer; None (YAML
+                      null) = off. [m]
     """
 
     blend_time_s: float = 0.15
@@ -60,15 +69,43 @@ class ExecutorConfig:
     gripper_settle_s: float = 0.5
     resync_tol_rad: float = 0.01
     reflex_tracking_rad: float | None = 0.25
+    transit_min_horizontal_m: float | None = 0.06
+    transit_min_vertical_m: float = 0.02
 
     def __post_init__(self) -> None:
-        for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s"):
+        for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s", "transit_min_vertical_m"):
             require_nonnegative(name, getattr(self, name))
+        if self.transit_min_horizontal_m is not None:
+            require_positive("transit_min_horizontal_m (or null: off)", self.transit_min_horizontal_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
         if self.reflex_tracking_rad is not None:  # None (YAML null) switches the reflex off
             require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
+
+
+def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
+                    min_horizontal_m: float, min_vertical_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Waypoints with every diagonal segment split into a sideways and a vertical move, the sideways one at the
+    higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
+    that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
+    sideways and more than ``min_vertical_m`` up or down. ``start`` and ``start_closed`` are the TCP and the
+    gripper command now (the first segment's start). A corner keeps the gripper bit of its segment's start, so grasps and releases still happen at
+    the planned points. Pure function; returns new (points, grip) arrays."""
+    out_p, out_g = [], []
+    prev = np.asarray(start, float)
+    prev_g = bool(start_closed)
+    for p, g in zip(points, grip):
+        horizontal = float(np.linalg.norm(p[:2] - prev[:2]))
+        dz = float(p[2] - prev[2])
+        if horizontal > min_horizontal_m and abs(dz) > min_vertical_m:
+            corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
+            out_p.append(corner)
+            out_g.append(prev_g)
+        out_p.append(p)
+        out_g.append(bool(g))
+        prev, prev_g = p, bool(g)
+    return np.asarray(out_p), np.asarray(out_g, bool)
 
 
 class MotionExecutor:
@@ -113,7 +150,12 @@ class MotionExecutor:
         except LiftError as exc:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
-        self.plan, self.points, self.grip = plan, points, np.asarray(plan.gripper_closed, bool)
+        grip = np.asarray(plan.gripper_closed, bool)
+        if self.config.transit_min_horizontal_m is not None:
+            points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
+                                           min_horizontal_m=self.config.transit_min_horizontal_m,
+                                           min_vertical_m=self.config.transit_min_vertical_m)
+        self.plan, self.points, self.grip = plan, points, grip
         self.latest_points[plan.kind] = (points, self.grip)
         q = self.sim.q
         ref_q = self.smoother.reference.q
@@ -125,7 +167,8 @@ class MotionExecutor:
                 self.event("reference_brake", reason=str(exc))
                 self.smoother.brake(q, self.sim.qd)
             self._ik_seed = q
-        self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan))
+        self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan),
+                   corners_added=len(points) - len(plan))
         self._activate(0)
         return True
 

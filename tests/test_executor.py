@@ -1,0 +1,95 @@
+"""Executor: plan shaping before IK (square transits) and its settings."""
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np
+import pytest
+
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.executor import ExecutorConfig, square_transits
+
+H, V = 0.06, 0.02  # the thresholds these tests use
+
+
+def square(start, start_closed, points, grip):
+    return square_transits(np.asarray(start, float), start_closed, np.asarray(points, float), np.asarray(grip, bool),
+                           min_horizontal_m=H, min_vertical_m=V)
+
+
+def test_a_diagonal_descent_moves_over_at_height_then_lowers():
+    pts, grip = square([0.4, 0.0, 0.20], True, [[0.6, 0.0, 0.05]], [False])  # carry over, release at the end
+    np.testing.assert_allclose(pts, [[0.6, 0.0, 0.20], [0.6, 0.0, 0.05]])
+    # the corner keeps the carried object's bit: the release stays at the planned point, not above it
+    assert grip.tolist() == [True, False]
+
+
+def test_a_diagonal_rise_raises_first_then_moves_over():
+    pts, grip = square([0.4, 0.0, 0.02], True, [[0.4, 0.0, 0.03], [0.6, 0.1, 0.20]], [True, True])
+    np.testing.assert_allclose(pts, [[0.4, 0.0, 0.03], [0.4, 0.0, 0.20], [0.6, 0.1, 0.20]])
+    assert grip.tolist() == [True, True, True]
+
+
+def test_the_first_segment_starts_at_the_tcp_with_the_current_gripper_command():
+    # open gripper high up; the plan's first point is a grasp low and far to the side
+    pts, grip = square([0.4, 0.0, 0.30], False, [[0.5, 0.2, 0.02], [0.5, 0.2, 0.10]], [True, True])
+    np.testing.assert_allclose(pts[0], [0.5, 0.2, 0.30])
+    assert grip.tolist() == [False, True, True]  # close at the grasp point, not at the corner above it
+
+
+@pytest.mark.parametrize("points", [
+    [[0.6, 0.0, 0.012], [0.35, 0.0, 0.004]],  # a drag along the table: sideways, (almost) level
+    [[0.4, 0.0, 0.05], [0.4, 0.0, 0.30]],     # straight up
+    [[0.44, 0.03, 0.12], [0.47, 0.06, 0.08]],  # short diagonal steps (an oracle's 4 cm spacing)
+])
+def test_level_vertical_and_short_segments_are_left_alone(points):
+    start = [0.4, 0.0, 0.015] if points[0][2] < 0.02 else [0.4, 0.0, 0.15]
+    grip = [True] * len(points)
+    pts, g = square(start, True, points, grip)
+    np.testing.assert_array_equal(pts, np.asarray(points))
+    assert g.tolist() == grip
+
+
+def test_squared_path_keeps_every_planned_point_in_order():
+    rng = np.random.default_rng(0)
+    points = rng.uniform([0.3, -0.25, 0.0], [0.65, 0.25, 0.35], size=(30, 3))
+    grip = rng.random(30) < 0.5
+    pts, g = square([0.45, 0.0, 0.35], False, points, grip)
+    kept = [i for i, p in enumerate(pts) if any(np.array_equal(p, q) for q in points)]
+    assert len(pts) > len(points)  # random points: most segments are diagonal
+    np.testing.assert_array_equal(pts[kept], points)
+    np.testing.assert_array_equal(g[kept], grip)
+    # every added corner is level with one neighbour and straight above/below the other
+    for i in sorted(set(range(len(pts))) - set(kept)):
+        a, c, b = pts[i - 1] if i else np.array([0.45, 0.0, 0.35]), pts[i], pts[i + 1]
+        assert (c[2] == a[2] and np.array_equal(c[:2], b[:2])) or (c[2] == b[2] and np.array_equal(c[:2], a[:2]))
+
+
+def test_oracle_plans_are_never_squared():
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.lift import lift_waypoints
+    from tcot_hybrid.run_config import RunConfig
+
+    for task in ("long_stack_three_blocks", "tool_pull_cube_with_stick", "long_open_drawer_put_cube"):
+        runner = EpisodeRunner(RunConfig(task=task, seed=3))
+        runner.settle()
+        runner._step_once(0, may_plan=True)
+        plan = runner.plans[0]
+        points = lift_waypoints(plan.uv_px, plan.depth_m, runner.stack.camera)
+        cfg = ExecutorConfig()
+        pts, _ = square_transits(runner.stack.sim.tcp_pos(), False, points, plan.gripper_closed,
+                                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m)
+        assert len(pts) == len(points), task
+        adopted = [e for e in runner.stack.executor.events if e["kind"] == "plan_adopted"]
+        assert adopted[0]["corners_added"] == 0
+
+
+@pytest.mark.parametrize("field,value", [("transit_min_horizontal_m", 0.0), ("transit_min_horizontal_m", -0.1),
+                                         ("transit_min_vertical_m", -0.01)])
+def test_transit_thresholds_are_checked(field, value):
+    with pytest.raises(ConfigError, match=field):
+        ExecutorConfig(**{field: value})
+
+
+def test_squaring_can_be_switched_off():
+    assert ExecutorConfig(transit_min_horizontal_m=None).transit_min_horizontal_m is None
