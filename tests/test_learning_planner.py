@@ -165,6 +165,23 @@ def test_output_validation(planner, monkeypatch):
         planner.success_probability(_obs())
 
 
+def test_a_plan_below_the_table_is_refused_not_executed(planner, monkeypatch):
+    check_outputs(np.zeros((2, 2)), np.array([0.01, -0.005]), np.array([0.5, 0.5]), min_height_m=-0.02)  # grazing: kept
+    with pytest.raises(PlanningError, match=r"waypoint 1 has TCP height z_m = -0.5030 m.*learned.min_height_m"):
+        check_outputs(np.zeros((3, 2)), np.array([0.1, -0.503, -0.3]), np.full(3, 0.5), min_height_m=-0.02)
+    real = planner.model.forward
+
+    def sunk_forward(*a, **k):
+        out = real(*a, **k)
+        if "z_m" in out:
+            out["z_m"] = out["z_m"] - 1.0  # every waypoint a metre lower
+        return out
+    monkeypatch.setattr(planner.model, "forward", sunk_forward)
+    for mode in ("global", "local"):
+        with pytest.raises(PlanningError, match="below the lowest allowed"):
+            planner.plan(_obs(), mode=mode)
+
+
 def test_instruction_policy(planner):
     assert words("Put the Cube, on the plate!") == ["put", "the", "cube", "on", "the", "plate"]
     planner.plan(_obs(instruction="Put the cube onto the plate."), mode="global")  # 1 of 6 unknown: accepted
@@ -256,3 +273,5 @@ def test_learned_planner_config_validated():
         LearnedPlannerConfig(switch_window=-1)
     with pytest.raises(ConfigError, match="switch_min_rise_m"):
         LearnedPlannerConfig(switch_min_rise_m=-0.1)
+    with pytest.raises(ConfigError, match="min_height_m"):
+        LearnedPlannerConfig(min_height_m=float("nan"))

@@ -39,16 +39,22 @@ class LearnedPlannerConfig:
                       Up: corrects larger timing slips, but may pull a switch into a neighbouring descent.
     switch_min_rise_m: move a switch only when its waypoint is this much higher than that lowest one [m]
                       (horizontal pulls, e.g. a drawer, keep their switch). Down: moves more switches.
+    min_height_m:     a plan with a waypoint's TCP height below this is refused (``PlanningError``), not
+                      executed [m]: the fingers would be inside the table (top at z = 0). Demonstrated grasps
+                      are at 1-2 cm; late in failed episodes the local prompt was seen to answer -0.5 m.
+                      Up: refuses more plans with low points; down: lets the arm try to push into the table.
     """
 
     switch_window: int = 2
     switch_min_rise_m: float = 0.015
+    min_height_m: float = -0.02
 
     def __post_init__(self) -> None:
-        from tcot_hybrid.config import require_int, require_nonnegative
+        from tcot_hybrid.config import require_finite, require_int, require_nonnegative
 
         require_int("learned.switch_window", self.switch_window, minimum=0)
         require_nonnegative("learned.switch_min_rise_m", self.switch_min_rise_m)
+        require_finite("learned.min_height_m", self.min_height_m)
 
 
 def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, min_rise_m: float) -> np.ndarray:
@@ -117,14 +123,23 @@ def check_state(q, gripper_closed, dof: int) -> np.ndarray:
     return np.r_[qa, np.float32(bool(gripper_closed))]
 
 
-def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, success_prob=None) -> None:
-    """Refuse non-finite waypoints/heights and probabilities that are not finite or outside [0, 1]."""
+def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, success_prob=None, *,
+                  min_height_m: float | None = None) -> None:
+    """Refuse non-finite waypoints/heights, heights below ``min_height_m`` (when given) and probabilities that
+    are not finite or outside [0, 1]."""
     uv, z, g = np.asarray(uv_px, float), np.asarray(z_m, float), np.asarray(grip_prob, float)
     bad = np.flatnonzero(~(np.isfinite(uv).all(-1) & np.isfinite(z)))
     if bad.size:
         i = int(bad[0])
         raise PlanningError(f"planner output waypoint {i} is not finite: uv_px={uv[i].tolist()}, z_m={z[i]} "
                             f"({bad.size} of {len(uv)} bad)")
+    if min_height_m is not None:
+        bad = np.flatnonzero(z < min_height_m)
+        if bad.size:
+            i = int(bad[0])
+            raise PlanningError(f"planner output waypoint {i} has TCP height z_m = {z[i]:.4f} m, below the lowest "
+                                f"allowed {min_height_m} m (learned.min_height_m; table top at 0); "
+                                f"{bad.size} of {len(z)} waypoints too low")
     bad = np.flatnonzero(~((g >= 0) & (g <= 1)))
     if bad.size:
         i = int(bad[0])
@@ -216,7 +231,7 @@ class LearnedPlanner(NetworkPlanner):
         uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float)
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
-        check_outputs(uv, z, prob)
+        check_outputs(uv, z, prob, min_height_m=self.config.min_height_m)
         return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
                            meta={"z_m": z, "gripper_prob": prob})
 
