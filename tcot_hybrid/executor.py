@@ -58,7 +58,8 @@ class ExecutorConfig:
                       demonstration's lower-after-moving-over, and a carried cube swept diagonally into the
                       drawer's far wall and pushed the drawer shut (docs/planner.md, "Square transits").
                       Oracle plans are never split: their points are at most ``OracleConfig.spacing_m``
-                      (4 cm) apart. Down: more segments squared, more time spent; up: fewer; None (YAML
+                      (4 cm) apart; nor are direct plans (one waypoint: the baseline's action, not a
+                      sampled track). Down: more segments squared, more time spent; up: fewer; None (YAML
                       null) = off. [m]
     """
 
@@ -151,7 +152,7 @@ class MotionExecutor:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
         grip = np.asarray(plan.gripper_closed, bool)
-        if self.config.transit_min_horizontal_m is not None:
+        if self.config.transit_min_horizontal_m is not None and plan.kind != "direct":
             points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
                                            min_horizontal_m=self.config.transit_min_horizontal_m,
                                            min_vertical_m=self.config.transit_min_vertical_m)

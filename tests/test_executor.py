@@ -93,3 +93,20 @@ def test_transit_thresholds_are_checked(field, value):
 
 def test_squaring_can_be_switched_off():
     assert ExecutorConfig(transit_min_horizontal_m=None).transit_min_horizontal_m is None
+
+
+def test_executor_squares_sampled_tracks_but_not_a_direct_action():
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    runner = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=0))
+    ex, cam = runner.stack.executor, runner.stack.camera
+    far_low = ex.sim.tcp_pos() + np.array([0.10, 0.10, -0.15])  # diagonal: 14 cm sideways, 15 cm down
+    uv, depth = cam.project(far_low[None])
+    for kind, corners in (("local", 1), ("global", 1), ("direct", 0)):
+        plan = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name, kind=kind)
+        assert ex.set_plan(plan)
+        assert ex.events[-1]["corners_added"] == corners, kind
+        assert len(ex.points) == 1 + corners
+        np.testing.assert_allclose(ex.points[-1], far_low, atol=1e-9)
