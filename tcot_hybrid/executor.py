@@ -91,8 +91,8 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
     that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
     sideways and more than ``min_vertical_m`` up or down. ``start`` and ``start_closed`` are the TCP and the
-    gripper command now (the first segment's start). A corner keeps the gripper bit of its segment's start, so grasps and releases still happen at
-    the planned points. Pure function; returns new (points, grip) arrays."""
+    gripper command now (the first segment's start). A corner keeps the gripper bit of its segment's start,
+    so grasps and releases still happen at the planned points. Pure function; returns new arrays."""
     out_p, out_g = [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
