@@ -21,7 +21,9 @@ from tcot_hybrid.planners.learned import (  # noqa: E402
     LearnedPlanner,
     LearnedPlannerConfig,
     align_gripper_switches,
+    align_switches_to_dwells,
     check_outputs,
+    height_plan,
 )
 from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.robot import load_robot_spec  # noqa: E402
@@ -268,10 +270,53 @@ def test_gripper_switch_kept_on_flat_segments_and_never_crosses_another_switch()
     assert out[1] and not out[0]
 
 
+# measured shape (tool task, evaluation seed 1001, x/z of the t = 0 plan, y constant): the release predicted
+# at waypoint 10, mid-drag; the drag ends at waypoint 11, where the arm dwells
+DRAG_X = [.453, .385, .354, .346, .347, .349, .36, .363, .569, .549, .427, .33, .328, .329, .33]
+DRAG_Z = [.351, .24, .14, .057, .01, .007, .064, .107, .074, .007, .001, .014, .016, .015, .015]
+DRAG_G = [0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0]
+
+
+def _drag():
+    return np.c_[DRAG_X, np.full(len(DRAG_X), 0.06), DRAG_Z], np.array(DRAG_G, bool)
+
+
+def test_a_release_the_arm_leaves_at_once_moves_to_where_the_arm_dwells():
+    pts, g = _drag()
+    out = align_switches_to_dwells(pts, g, window=2, leave_m=0.03, dwell_m=0.01)
+    assert np.flatnonzero(np.diff(out.astype(int))).tolist() == [3, 10]  # close at 4 (kept), open at 11
+    assert np.array_equal(align_switches_to_dwells(pts, g, window=0, leave_m=0.03, dwell_m=0.01), g)  # off
+
+
+def test_switches_at_a_dwell_or_without_one_nearby_are_kept():
+    pts, g = _drag()
+    g = np.array([0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0], bool)  # release already at the dwell
+    assert np.array_equal(align_switches_to_dwells(pts, g, window=2, leave_m=0.03, dwell_m=0.01), g)
+    pts = np.c_[np.linspace(0.3, 0.6, 8), np.zeros(8), np.full(8, 0.1)]  # moving all the time: nowhere to go
+    g = np.array([0, 0, 0, 1, 1, 1, 1, 1], bool)
+    assert np.array_equal(align_switches_to_dwells(pts, g, window=3, leave_m=0.03, dwell_m=0.01), g)
+
+
+def test_dwell_alignment_applies_to_global_plans_only(camera):
+    pts, g = _drag()
+    uv, depth = camera.project(pts)
+    cfg = LearnedPlannerConfig()
+    glob = height_plan(camera, uv, pts[:, 2], g, kind="global", step=0, config=cfg)
+    local = height_plan(camera, uv, pts[:, 2], g, kind="local", step=0, config=cfg)
+    assert np.flatnonzero(np.diff(glob.gripper_closed.astype(int))).tolist() == [3, 10]
+    assert np.array_equal(local.gripper_closed, g)
+    off = height_plan(camera, uv, pts[:, 2], g, kind="global", step=0, config=LearnedPlannerConfig(dwell_leave_m=None))
+    assert np.array_equal(off.gripper_closed, g)
+
+
 def test_learned_planner_config_validated():
     with pytest.raises(ConfigError, match="switch_window"):
         LearnedPlannerConfig(switch_window=-1)
     with pytest.raises(ConfigError, match="switch_min_rise_m"):
         LearnedPlannerConfig(switch_min_rise_m=-0.1)
+    with pytest.raises(ConfigError, match="dwell_leave_m"):
+        LearnedPlannerConfig(dwell_leave_m=0.0)
+    with pytest.raises(ConfigError, match="dwell_step_m"):
+        LearnedPlannerConfig(dwell_step_m=-0.01)
     with pytest.raises(ConfigError, match="min_height_m"):
         LearnedPlannerConfig(min_height_m=float("nan"))

@@ -39,6 +39,13 @@ class LearnedPlannerConfig:
                       Up: corrects larger timing slips, but may pull a switch into a neighbouring descent.
     switch_min_rise_m: move a switch only when its waypoint is this much higher than that lowest one [m]
                       (horizontal pulls, e.g. a drawer, keep their switch). Down: moves more switches.
+    dwell_leave_m, dwell_step_m: a global plan's switch that the arm leaves at once (the next waypoint more than
+                      ``dwell_leave_m`` away) is moved to the nearest waypoint within ``switch_window`` where the
+                      arm dwells (the next waypoint closer than ``dwell_step_m``) [m]. Every demonstration
+                      switches where the arm has stopped (it waits ``gripper_settle_s``); a far-future release
+                      predicted one waypoint early let go of the stick half-way through the drag. Global plans
+                      only: local plans span 1.6 s, where the heads hardly disagree on timing. dwell_leave_m
+                      None = off. Down: moves more switches.
     min_height_m:     a plan with a waypoint's TCP height below this is refused (``PlanningError``), not
                       executed [m]: the fingers would be inside the table (top at z = 0). Demonstrated grasps
                       are at 1-2 cm; late in failed episodes the local prompt was seen to answer -0.5 m.
@@ -47,13 +54,18 @@ class LearnedPlannerConfig:
 
     switch_window: int = 2
     switch_min_rise_m: float = 0.015
+    dwell_leave_m: float | None = 0.03
+    dwell_step_m: float = 0.01
     min_height_m: float = -0.02
 
     def __post_init__(self) -> None:
-        from tcot_hybrid.config import require_finite, require_int, require_nonnegative
+        from tcot_hybrid.config import require_finite, require_int, require_nonnegative, require_positive
 
         require_int("learned.switch_window", self.switch_window, minimum=0)
         require_nonnegative("learned.switch_min_rise_m", self.switch_min_rise_m)
+        if self.dwell_leave_m is not None:
+            require_positive("learned.dwell_leave_m (or null: off)", self.dwell_leave_m)
+        require_positive("learned.dwell_step_m", self.dwell_step_m)
         require_finite("learned.min_height_m", self.min_height_m)
 
 
@@ -80,15 +92,46 @@ def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, 
     return out
 
 
+def align_switches_to_dwells(points: np.ndarray, closed: np.ndarray, *, window: int, leave_m: float,
+                             dwell_m: float) -> np.ndarray:
+    """Gripper bits with every switch whose waypoint the arm leaves at once (next waypoint more than ``leave_m``
+    away) moved to the nearest waypoint within ``window`` where it dwells (next waypoint closer than
+    ``dwell_m``); switches never move onto or across their neighbours. Pure function."""
+    p, out = np.asarray(points, float), np.asarray(closed, bool).copy()
+    if window <= 0 or len(p) < 2:
+        return out
+    step = np.r_[np.linalg.norm(np.diff(p, axis=0), axis=1), 0.0]  # step[k]: distance from waypoint k to k + 1
+    flips = np.flatnonzero(out[1:] != out[:-1]) + 1
+    prev = 0
+    for k, i in enumerate(flips):
+        last = (flips[k + 1] - 1) if k + 1 < len(flips) else len(p) - 1
+        if step[i] > leave_m:
+            dwells = [j for j in range(max(i - window, prev + 1), min(i + window, last) + 1) if step[j] < dwell_m]
+            if dwells:
+                j = min(dwells, key=lambda j: (abs(j - i), j))
+                new, old = out[i], out[i - 1]
+                if j < i:
+                    out[j:i] = new
+                else:
+                    out[i:j] = old
+                i = j
+        prev = i
+    return out
+
+
 def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
                 step: int, config: LearnedPlannerConfig, meta: dict | None = None) -> WaypointPlan:
     """The plan for waypoints given as pixel + TCP height + gripper bit (the learned planner's output form):
-    ``depth_m`` where each pixel's ray meets z = z_m, gripper switches aligned to the bottom of their descent."""
+    ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
+    and, in global plans, to where the arm dwells."""
     try:
         depth = depth_at_height(camera, uv_px, z_m)
     except LiftError as exc:
         raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
     closed = align_gripper_switches(z_m, closed, window=config.switch_window, min_rise_m=config.switch_min_rise_m)
+    if kind == "global" and config.dwell_leave_m is not None:
+        closed = align_switches_to_dwells(camera.unproject(uv_px, depth), closed, window=config.switch_window,
+                                          leave_m=config.dwell_leave_m, dwell_m=config.dwell_step_m)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
                         step=step, meta=meta or {})
 
