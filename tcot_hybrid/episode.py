@@ -59,7 +59,7 @@ def validate_names(cfg: RunConfig) -> None:
     from tcot_hybrid.controllers import list_controllers
     from tcot_hybrid.errors import ControllerError, unknown_name
     from tcot_hybrid.ik import list_ik
-    from tcot_hybrid.ik.base import joint_bounds
+    from tcot_hybrid.ik.base import check_ik_options, joint_bounds
 
     make_task(cfg.task)
     robot = load_robot_spec(cfg.robot)
@@ -71,6 +71,7 @@ def validate_names(cfg: RunConfig) -> None:
 
         raise ConfigError(unknown_name("ik backend", cfg.ik, list_ik()))
     joint_bounds(robot, cfg.ik_params)  # a joint-limit margin this robot cannot take
+    check_ik_options(cfg.ik, cfg.ik_params)  # e.g. collision avoidance asked of a backend without it
     check_planner_name(cfg.planner)
     if cfg.checkpoint is not None and not Path(cfg.checkpoint).is_file():  # else the record's hash fails at the end
         from tcot_hybrid.errors import ConfigError

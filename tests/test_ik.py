@@ -139,8 +139,17 @@ def test_margin_larger_than_joint_range_is_refused_before_a_run_builds_anything(
 
 
 def test_collision_avoidance_is_refused_by_pinocchio_backend():
-    with pytest.raises(ConfigError, match="collision_avoidance"):
+    with pytest.raises(ConfigError, match=r"ik_params.collision_avoidance = True .* \['mink'\], not by 'pinocchio'"):
         make_ik("pinocchio", spec("panda"), IKConfig(collision_avoidance=True))
+
+
+def test_a_run_asking_pinocchio_for_collision_avoidance_is_refused_before_anything_is_built():
+    from tcot_hybrid.episode import validate_names
+    from tcot_hybrid.run_config import RunConfig
+
+    with pytest.raises(ConfigError, match="ik_params.collision_avoidance"):
+        validate_names(RunConfig(ik="pinocchio", ik_params=IKConfig(collision_avoidance=True)))
+    validate_names(RunConfig(ik="mink", ik_params=IKConfig(collision_avoidance=True)))  # mink has it
 
 
 # -- input validation -------------------------------------------------------------------------------

@@ -179,12 +179,14 @@ class IKSolver(ABC):
     """
 
     name: ClassVar[str]
+    supports_collision_avoidance: ClassVar[bool] = False
 
     def __init__(self, spec: RobotSpec, config: IKConfig | None = None) -> None:
         self.spec = spec
         self.config = IKConfig() if config is None else config
         if not isinstance(self.config, IKConfig):
             raise ConfigError(f"config must be an IKConfig, got {type(self.config).__name__}")
+        check_ik_options(self.name, self.config)
         cfg = self.config
         self.dof = int(spec.dof)
         self.lower, self.upper = joint_bounds(spec, cfg)
@@ -299,6 +301,14 @@ def register_ik(cls: type[IKSolver]) -> type[IKSolver]:
 def list_ik() -> list[str]:
     """Names of the registered IK backends."""
     return sorted(_REGISTRY)
+
+
+def check_ik_options(name: str, config: IKConfig) -> None:
+    """Refuse options the backend ``name`` does not implement (the run checks this before building anything)."""
+    if config.collision_avoidance and not _REGISTRY[name].supports_collision_avoidance:
+        able = sorted(n for n, c in _REGISTRY.items() if c.supports_collision_avoidance)
+        raise ConfigError(f"ik_params.collision_avoidance = True is only implemented by the IK backends {able}, "
+                          f"not by {name!r}; choose one of those or set ik_params.collision_avoidance = false")
 
 
 def make_ik(name: str, spec: RobotSpec, config: IKConfig | None = None) -> IKSolver:

@@ -99,6 +99,7 @@ class MinkIK(IKSolver):
     """Differential IK with mink (QP per step, solver ``config.solver``)."""
 
     name = "mink"
+    supports_collision_avoidance = True
 
     def __init__(self, spec, config: IKConfig | None = None) -> None:
         super().__init__(spec, config)

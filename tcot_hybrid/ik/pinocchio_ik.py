@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from tcot_hybrid.errors import ConfigError, RobotModelError
+from tcot_hybrid.errors import RobotModelError
 from tcot_hybrid.ik.base import (
     CONVERGED,
     MAX_ITERS,
@@ -35,11 +35,6 @@ class PinocchioIK(IKSolver):
 
     def __init__(self, spec, config: IKConfig | None = None) -> None:
         super().__init__(spec, config)
-        if self.config.collision_avoidance:
-            raise ConfigError(
-                "collision_avoidance = True is only implemented by the 'mink' IK backend; "
-                "use make_ik('mink', ...) or set collision_avoidance = False"
-            )
         from tcot_hybrid.robot import build_pinocchio_model
 
         robot = build_pinocchio_model(spec, lock_gripper=True)
