@@ -69,19 +69,19 @@ class LearnedPlannerConfig:
         require_finite("learned.min_height_m", self.min_height_m)
 
 
-def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, min_rise_m: float) -> np.ndarray:
-    """Gripper bits with every switch moved to the lowest waypoint within ``window`` of it, when the switch's
-    own waypoint is more than ``min_rise_m`` higher (see :class:`LearnedPlannerConfig`). Pure function."""
-    z, out = np.asarray(z_m, float), np.asarray(closed, bool).copy()
+def _move_switches(closed: np.ndarray, window: int, choose) -> np.ndarray:
+    """Gripper bits with each switch i moved to ``choose(i, lo, hi)``: an index in lo..hi (within ``window`` of i
+    and strictly between its neighbouring switches, so none moves onto or across another) or None (stay)."""
+    out = np.asarray(closed, bool).copy()
     if window <= 0:
         return out
     flips = np.flatnonzero(out[1:] != out[:-1]) + 1
-    prev = 0  # where the previous switch ended up: a switch never moves onto or across its neighbours
+    prev = 0  # where the previous switch ended up
     for k, i in enumerate(flips):
         lo = max(i - window, prev + 1)
-        hi = min(i + window, (flips[k + 1] - 1) if k + 1 < len(flips) else len(z) - 1)
-        j = lo + int(np.argmin(z[lo:hi + 1]))
-        if j != i and z[i] - z[j] > min_rise_m:
+        hi = min(i + window, (flips[k + 1] - 1) if k + 1 < len(flips) else len(out) - 1)
+        j = choose(i, lo, hi)
+        if j is not None and j != i:
             new, old = out[i], out[i - 1]
             if j < i:
                 out[j:i] = new
@@ -92,31 +92,31 @@ def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, 
     return out
 
 
+def align_gripper_switches(z_m: np.ndarray, closed: np.ndarray, *, window: int, min_rise_m: float) -> np.ndarray:
+    """Gripper bits with every switch moved to the lowest waypoint within ``window`` of it, when the switch's
+    own waypoint is more than ``min_rise_m`` higher (see :class:`LearnedPlannerConfig`). Pure function."""
+    z = np.asarray(z_m, float)
+
+    def lowest(i, lo, hi):
+        j = lo + int(np.argmin(z[lo:hi + 1]))
+        return j if z[i] - z[j] > min_rise_m else None
+
+    return _move_switches(closed, window, lowest)
+
+
 def align_switches_to_dwells(points: np.ndarray, closed: np.ndarray, *, window: int, leave_m: float,
                              dwell_m: float) -> np.ndarray:
     """Gripper bits with every switch whose waypoint the arm leaves at once (next waypoint more than ``leave_m``
     away) moved to the nearest waypoint within ``window`` where it dwells (next waypoint closer than
     ``dwell_m``); switches never move onto or across their neighbours. Pure function."""
-    p, out = np.asarray(points, float), np.asarray(closed, bool).copy()
-    if window <= 0 or len(p) < 2:
-        return out
+    p = np.asarray(points, float)
     step = np.r_[np.linalg.norm(np.diff(p, axis=0), axis=1), 0.0]  # step[k]: distance from waypoint k to k + 1
-    flips = np.flatnonzero(out[1:] != out[:-1]) + 1
-    prev = 0
-    for k, i in enumerate(flips):
-        last = (flips[k + 1] - 1) if k + 1 < len(flips) else len(p) - 1
-        if step[i] > leave_m:
-            dwells = [j for j in range(max(i - window, prev + 1), min(i + window, last) + 1) if step[j] < dwell_m]
-            if dwells:
-                j = min(dwells, key=lambda j: (abs(j - i), j))
-                new, old = out[i], out[i - 1]
-                if j < i:
-                    out[j:i] = new
-                else:
-                    out[i:j] = old
-                i = j
-        prev = i
-    return out
+
+    def nearest_dwell(i, lo, hi):
+        dwells = [j for j in range(lo, hi + 1) if step[j] < dwell_m] if step[i] > leave_m else []
+        return min(dwells, key=lambda j: (abs(j - i), j)) if dwells else None
+
+    return _move_switches(closed, window, nearest_dwell)
 
 
 def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
