@@ -58,20 +58,16 @@ def validate_names(cfg: RunConfig) -> None:
     the valid choices)."""
     from tcot_hybrid.controllers import list_controllers
     from tcot_hybrid.errors import ControllerError, unknown_name
-    from tcot_hybrid.ik import list_ik
-    from tcot_hybrid.ik.base import check_ik_options, joint_bounds
+    from tcot_hybrid.ik.base import check_ik_options, ik_backend, joint_bounds
 
     make_task(cfg.task)
     robot = load_robot_spec(cfg.robot)
     if cfg.controller not in list_controllers():
         raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
     make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt, params=cfg.controller_params)
-    if cfg.ik not in list_ik():
-        from tcot_hybrid.errors import ConfigError
-
-        raise ConfigError(unknown_name("ik backend", cfg.ik, list_ik()))
+    backend = ik_backend(cfg.ik)  # an unknown name is refused listing the backends
     joint_bounds(robot, cfg.ik_params)  # a joint-limit margin this robot cannot take
-    check_ik_options(cfg.ik, cfg.ik_params)  # e.g. collision avoidance asked of a backend without it
+    check_ik_options(backend, cfg.ik_params)  # e.g. collision avoidance asked of a backend without it
     check_planner_name(cfg.planner)
     if cfg.checkpoint is not None and not Path(cfg.checkpoint).is_file():  # else the record's hash fails at the end
         from tcot_hybrid.errors import ConfigError

@@ -186,7 +186,7 @@ class IKSolver(ABC):
         self.config = IKConfig() if config is None else config
         if not isinstance(self.config, IKConfig):
             raise ConfigError(f"config must be an IKConfig, got {type(self.config).__name__}")
-        check_ik_options(self.name, self.config)
+        check_ik_options(type(self), self.config)
         cfg = self.config
         self.dof = int(spec.dof)
         self.lower, self.upper = joint_bounds(spec, cfg)
@@ -303,18 +303,23 @@ def list_ik() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def check_ik_options(name: str, config: IKConfig) -> None:
-    """Refuse options the backend ``name`` does not implement (the run checks this before building anything)."""
-    if config.collision_avoidance and not _REGISTRY[name].supports_collision_avoidance:
+def ik_backend(name: str) -> type[IKSolver]:
+    """The registered IK backend class ``name``; an unknown name is refused listing the valid ones."""
+    cls = _REGISTRY.get(name) if isinstance(name, str) else None
+    if cls is None:
+        raise ConfigError(unknown_name("ik backend", name, _REGISTRY))  # names the run-config field `ik`
+    return cls
+
+
+def check_ik_options(backend: type[IKSolver], config: IKConfig) -> None:
+    """Refuse options ``backend`` does not implement (the run checks this before building anything)."""
+    if config.collision_avoidance and not backend.supports_collision_avoidance:
         able = sorted(n for n, c in _REGISTRY.items() if c.supports_collision_avoidance)
         raise ConfigError(f"ik_params.collision_avoidance = True is only implemented by the IK backends {able}, "
-                          f"not by {name!r}; choose one of those or set ik_params.collision_avoidance = false")
+                          f"not by {backend.name!r}; choose one of those or set ik_params.collision_avoidance = false")
 
 
 def make_ik(name: str, spec: RobotSpec, config: IKConfig | None = None) -> IKSolver:
     """Build the IK backend ``name`` ("mink" | "pinocchio") for robot ``spec``."""
-    cls = _REGISTRY.get(name) if isinstance(name, str) else None
-    if cls is None:
-        raise ConfigError(unknown_name("IK backend", name, _REGISTRY))
-    return cls(spec, config)
+    return ik_backend(name)(spec, config)
 
