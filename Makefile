@@ -45,11 +45,13 @@ planner: setup
 		--perturb none,$(PERTURBS) --episodes-per-task 2 --seed-start 400 --out data/online_learned_glsr_round2.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round4.yaml
 	$(BIN)/tcot train --config examples/configs/train_stage2_round5.yaml
-	# more scenes (seeds 600-999) for the tasks whose frozen t = 0 global plan fails most; round 6 is shipped
+	# more scenes (seeds 600-999) for the tasks whose frozen t = 0 global plan fails most
 	$(BIN)/tcot collect --episodes-per-task 150 --seed-start 600 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot collect --suite long --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot collect --suite tool --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round6.yaml
+	# round 8, shipped: round 6 retrained on event-spaced global windows
+	$(BIN)/tcot train --config examples/configs/train_stage2_round8.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
 clean:

@@ -61,6 +61,12 @@ class ExecutorConfig:
                       (4 cm) apart; nor are direct plans (one waypoint: the baseline's action, not a
                       sampled track). Down: more segments squared, more time spent; up: fewer; None (YAML
                       null) = off. [m]
+    switch_min_horizontal_m: the same for the segments into and out of a gripper switch (a grasp or release
+                      point), with this smaller sideways threshold: every demonstration comes straight down
+                      onto a grasp or place and leaves it straight up. Event-spaced global plans have ~10 cm
+                      between points, and a place descent starting 2-3 cm to the side brought a carried cube
+                      down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
+                      unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
     """
 
     blend_time_s: float = 0.15
@@ -72,12 +78,15 @@ class ExecutorConfig:
     reflex_tracking_rad: float | None = 0.25
     transit_min_horizontal_m: float | None = 0.06
     transit_min_vertical_m: float = 0.02
+    switch_min_horizontal_m: float | None = 0.005
 
     def __post_init__(self) -> None:
         for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s", "transit_min_vertical_m"):
             require_nonnegative(name, getattr(self, name))
         if self.transit_min_horizontal_m is not None:
             require_positive("transit_min_horizontal_m (or null: off)", self.transit_min_horizontal_m)
+        if self.switch_min_horizontal_m is not None:
+            require_positive("switch_min_horizontal_m (or null: off)", self.switch_min_horizontal_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -86,26 +95,34 @@ class ExecutorConfig:
 
 
 def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
-                    min_horizontal_m: float, min_vertical_m: float) -> tuple[np.ndarray, np.ndarray]:
+                    min_horizontal_m: float | None, min_vertical_m: float,
+                    switch_min_horizontal_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Waypoints with every diagonal segment split into a sideways and a vertical move, the sideways one at the
     higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
     that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
-    sideways and more than ``min_vertical_m`` up or down. ``start`` and ``start_closed`` are the TCP and the
-    gripper command now (the first segment's start). A corner keeps the gripper bit of its segment's start,
-    so grasps and releases still happen at the planned points. Pure function; returns new arrays."""
+    sideways (or more than ``switch_min_horizontal_m`` for a segment into or out of a gripper switch) and more
+    than ``min_vertical_m`` up or down; None thresholds are off. ``start`` and ``start_closed``
+    are the TCP and the gripper command now (the first segment's start). A corner keeps the gripper bit of its
+    segment's start, so grasps and releases still happen at the planned points. Pure function; returns new
+    arrays."""
     out_p, out_g = [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
+    prev_is_switch = False
     for p, g in zip(points, grip):
+        is_switch = bool(g) != prev_g
+        near_switch = is_switch or prev_is_switch
+        thresholds = [t for t in (min_horizontal_m, switch_min_horizontal_m if near_switch else None) if t is not None]
+        threshold = min(thresholds) if thresholds else None
         horizontal = float(np.linalg.norm(p[:2] - prev[:2]))
         dz = float(p[2] - prev[2])
-        if horizontal > min_horizontal_m and abs(dz) > min_vertical_m:
+        if threshold is not None and horizontal > threshold and abs(dz) > min_vertical_m:
             corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
             out_p.append(corner)
             out_g.append(prev_g)
         out_p.append(p)
         out_g.append(bool(g))
-        prev, prev_g = p, bool(g)
+        prev, prev_g, prev_is_switch = p, bool(g), is_switch
     return np.asarray(out_p), np.asarray(out_g, bool)
 
 
@@ -152,10 +169,12 @@ class MotionExecutor:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
         grip = np.asarray(plan.gripper_closed, bool)
-        if self.config.transit_min_horizontal_m is not None and plan.kind != "direct":
+        cfg = self.config
+        if plan.kind != "direct" and (cfg.transit_min_horizontal_m, cfg.switch_min_horizontal_m) != (None, None):
             points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                           min_horizontal_m=self.config.transit_min_horizontal_m,
-                                           min_vertical_m=self.config.transit_min_vertical_m)
+                                           min_horizontal_m=cfg.transit_min_horizontal_m,
+                                           min_vertical_m=cfg.transit_min_vertical_m,
+                                           switch_min_horizontal_m=cfg.switch_min_horizontal_m)
         self.plan, self.points, self.grip = plan, points, grip
         self.latest_points[plan.kind] = (points, self.grip)
         q = self.sim.q

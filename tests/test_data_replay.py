@@ -43,20 +43,24 @@ def test_noise_is_seeded_and_changes_the_plan(tool_demos):
     obs = Observation(step=0, image=None, depth_m=None, q=np.zeros(7), gripper_closed=False, instruction="")
 
     def plan(cfg, seed=1):
-        return LabelReplayPlanner(tr.uv_px, tr.z_m, tr.gripper_closed, camera, config=cfg, demo_seed=seed).plan(
-            obs, mode="global")
+        return LabelReplayPlanner(tr, camera, config=cfg, demo_seed=seed).plan(obs, mode="global")
 
     exact = plan(ReplayConfig())
     w = ReplayConfig().windows
     assert len(exact.uv_px) == w.L_g // 2 + 1
     np.testing.assert_allclose(exact.uv_px[1], tr.uv_px[w.n_g], atol=1e-5)  # point k is sample k * n_g
+    events = plan(ReplayConfig(windows=dataclasses.replace(w, global_spacing="events")))
+    switch = int(np.flatnonzero(tr.gripper_closed)[0])  # the grasp: first sample with the gripper closed
+    per = w.points_per_segment
+    np.testing.assert_allclose(events.uv_px[per], tr.uv_px[switch], atol=1e-5)  # the first piece ends on it
+    assert events.gripper_closed[per] and not events.gripper_closed[:per].any()
     noisy = ReplayConfig(noise_px=1.0)
     np.testing.assert_array_equal(plan(noisy).uv_px, plan(noisy).uv_px)
     assert not np.allclose(plan(noisy).uv_px, exact.uv_px)
     assert not np.allclose(plan(noisy, seed=2).uv_px, plan(noisy).uv_px)
     with pytest.raises(PlanningError, match="t = 0 global label"):
-        LabelReplayPlanner(tr.uv_px, tr.z_m, tr.gripper_closed, camera, config=ReplayConfig(),
-                           demo_seed=1).plan(dataclasses.replace(obs, step=3), mode="global")
+        LabelReplayPlanner(tr, camera, config=ReplayConfig(), demo_seed=1).plan(
+            dataclasses.replace(obs, step=3), mode="global")
 
 
 def test_bad_inputs_are_named(tool_demos):

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.data.labels import (
-    TrajectoryWindowConfig, global_index_table, global_indices, global_labels, local_index_table, local_indices,
-    local_labels, make_track, window_labels,
+    TrajectoryWindowConfig, event_index_table, global_index_table, global_indices, global_labels, local_index_table,
+    local_indices, local_labels, make_track, window_labels, windows_from_meta,
 )
 from tcot_hybrid.errors import ConfigError, DatasetError
 
@@ -100,3 +100,66 @@ def test_bad_track_refused():
         make_track(np.zeros((5, 2)), np.zeros(4), np.zeros(5))
     with pytest.raises(DatasetError):
         make_track(np.full((5, 2), np.nan), np.zeros(5), np.zeros(5))
+
+
+EVENTS = TrajectoryWindowConfig(L_g=9, L_l=3, n_l=2, global_spacing="events", points_per_segment=2)
+
+
+def _line_track(T: int, closed):
+    """Constant-speed straight track (1 cm per sample): path length == sample index."""
+    x = 0.01 * np.arange(T, dtype=float)
+    return np.c_[x, np.zeros(T), np.zeros(T)], np.asarray(closed, bool)
+
+
+def test_event_window_hand_computed():
+    # 21 samples, gripper closes at sample 8 and opens at 14: pieces 0..8, 8..14, 14..20
+    xyz, g = _line_track(21, [False] * 8 + [True] * 6 + [False] * 7)
+    table = event_index_table(xyz, g, EVENTS)
+    # t = 0: the middle point is t; 2 points per piece at path fractions 1/2 and 1, each piece ending on the
+    # switch sample (the first one with the new bit); past points clamp to sample 0
+    assert table[0].tolist() == [0, 0, 0, 0, 0, 4, 8, 11, 14]
+    # t = 10, inside the grasp: the rest of piece 10..14, then 14..20, then clamped at the last sample; the past
+    # half runs backwards (10 -> 7 -> 0) and its pieces end on the last sample with the old bit (7, before 8)
+    assert table[10].tolist() == [0, 3, 7, 8, 10, 12, 14, 17, 20]
+    # t = 20: nothing ahead; backwards 20 -> 13 (the sample before the opening at 14) -> 7
+    assert table[20].tolist() == [7, 10, 13, 16, 20, 20, 20, 20, 20]
+
+
+def test_event_window_ends_each_piece_on_its_switch_whatever_the_speed():
+    rng = np.random.default_rng(0)
+    T = 80
+    xyz = np.cumsum(rng.uniform(0.0, 0.02, (T, 3)), axis=0)  # uneven speed
+    g = np.zeros(T, bool)
+    g[20:45] = True
+    g[60:] = True
+    cfg = TrajectoryWindowConfig(L_g=51, global_spacing="events", points_per_segment=6)
+    table = event_index_table(xyz, g, cfg)
+    assert table.shape == (T, 51) and table.min() >= 0 and table.max() == T - 1
+    h = cfg.global_center
+    assert (table[:, h] == np.arange(T)).all()
+    assert table[0, h + 1:].tolist()[5::6][:3] == [20, 45, 60]  # every 6th future point is a switch sample
+    assert (np.diff(table, axis=1) >= 0).all()  # time runs forward through every window
+    track = make_track(np.zeros((T, 2)), xyz[:, 2], g, xyz)
+    labels = global_labels(track, cfg)
+    np.testing.assert_array_equal(labels.gripper_closed, g[table])
+
+
+def test_event_windows_need_the_track():
+    xyz, g = _line_track(10, [False] * 10)
+    with pytest.raises(ConfigError, match="global_spacing = 'time'.*global_labels"):
+        global_index_table(10, EVENTS)
+    with pytest.raises(DatasetError, match="xyz_m"):
+        global_labels(make_track(np.zeros((10, 2)), np.zeros(10), g), EVENTS)
+    with pytest.raises(ConfigError, match="global_spacing = 'distance' is not valid; choose one of time, events"):
+        TrajectoryWindowConfig(global_spacing="distance")
+    with pytest.raises(DatasetError, match="xyz_m"):
+        make_track(np.zeros((10, 2)), np.zeros(10), g, np.zeros((9, 3)))
+
+
+def test_windows_from_checkpoint_metadata():
+    old = {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}  # written before event spacing existed: eq. 4 windows
+    assert windows_from_meta(old) == TrajectoryWindowConfig()
+    new = {**old, "global_spacing": "events", "points_per_segment": 5}
+    assert windows_from_meta(new) == TrajectoryWindowConfig(global_spacing="events", points_per_segment=5)
+    with pytest.raises(ConfigError, match="incomplete"):
+        windows_from_meta({"L_g": 51})

@@ -297,16 +297,18 @@ def test_switches_at_a_dwell_or_without_one_nearby_are_kept():
     assert np.array_equal(align_switches_to_dwells(pts, g, window=3, leave_m=0.03, dwell_m=0.01), g)
 
 
-def test_dwell_alignment_applies_to_global_plans_only(camera):
+def test_dwell_alignment_applies_to_time_spaced_global_plans_only(camera):
     pts, g = _drag()
     uv, depth = camera.project(pts)
     cfg = LearnedPlannerConfig()
-    glob = height_plan(camera, uv, pts[:, 2], g, kind="global", step=0, config=cfg)
-    local = height_plan(camera, uv, pts[:, 2], g, kind="local", step=0, config=cfg)
-    assert np.flatnonzero(np.diff(glob.gripper_closed.astype(int))).tolist() == [3, 10]
-    assert np.array_equal(local.gripper_closed, g)
-    off = height_plan(camera, uv, pts[:, 2], g, kind="global", step=0, config=LearnedPlannerConfig(dwell_leave_m=None))
-    assert np.array_equal(off.gripper_closed, g)
+
+    def plan(kind, config=cfg, spacing="time"):
+        return height_plan(camera, uv, pts[:, 2], g, kind=kind, step=0, config=config, global_spacing=spacing)
+
+    assert np.flatnonzero(np.diff(plan("global").gripper_closed.astype(int))).tolist() == [3, 10]
+    assert np.array_equal(plan("local").gripper_closed, g)
+    assert np.array_equal(plan("global", spacing="events").gripper_closed, g)  # event plans show no dwells
+    assert np.array_equal(plan("global", config=LearnedPlannerConfig(dwell_leave_m=None)).gripper_closed, g)
 
 
 def test_learned_planner_config_validated():

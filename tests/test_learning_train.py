@@ -17,6 +17,7 @@ from safetensors.torch import load_file  # noqa: E402
 from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.learning.checkpoint import load_checkpoint  # noqa: E402
 from tcot_hybrid.learning.data import instructions_of, load_frames  # noqa: E402
+from tcot_hybrid.data.labels import TrajectoryWindowConfig, windows_from_meta  # noqa: E402
 from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
 from tcot_hybrid.learning.train import (  # noqa: E402
     Batcher,
@@ -183,10 +184,14 @@ def test_example_train_configs_load_and_chain():
     round6 = load_train_config(root / "train_stage2_round6.yaml")
     assert round6.init == round5.out and set(round6.online_data) == set(round5.online_data)
     assert round6.extra_data == ("data/demos_extra_panda.hdf5",) and round6.data == round5.data
+    round8 = load_train_config(root / "train_stage2_round8.yaml")  # same data, event-spaced global windows
+    assert round8.init == round6.out and round8.extra_data == round6.extra_data
+    assert set(round8.online_data) == set(round6.online_data) and round8.windows.global_spacing == "events"
     # the shipped checkpoint is the last round's output, with that round's config
     shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
-    assert shipped["train_config"]["out"] == round6.out
-    assert shipped["model"]["readout_radius_cells"] == round6.model.readout_radius_cells
+    assert shipped["train_config"]["out"] == round8.out
+    assert shipped["model"]["readout_radius_cells"] == round8.model.readout_radius_cells
+    assert windows_from_meta(shipped["windows"]) == round8.windows
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
@@ -272,7 +277,8 @@ def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, e
                   progress=False, log=lambda *_: None)
     cfg = _cfg(demo_file, tmp_path / "s2.safetensors", max_epochs=1, stage1_epochs=0, init=str(first.checkpoint),
                extra_data=[str(extra_demo_file)], extra_frame_stride=4,  # a list, as YAML gives it
-               online_data=(str(online_file),), epoch_samples=64)
+               online_data=(str(online_file),), epoch_samples=64,
+               windows=TrajectoryWindowConfig(global_spacing="events"))  # as round 8: eq.-4 init, event labels
     logs = []
     res = train(cfg, progress=False, log=logs.append)
     assert any("initialised from" in line for line in logs)
@@ -283,6 +289,7 @@ def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, e
     meta = load_checkpoint(res.checkpoint).meta
     assert meta["online_data"] == [str(online_file)] and meta["init"] == str(first.checkpoint)
     assert meta["extra_data"] == [str(extra_demo_file)] and meta["data_hash"].count("+") == 2
+    assert windows_from_meta(meta["windows"]) == cfg.windows
     with pytest.raises(ConfigError, match="init checkpoint .* has model"):
         train(_cfg(demo_file, tmp_path / "s3.safetensors", max_epochs=1, init=str(first.checkpoint),
                    model=ModelConfig(width=16)), progress=False, log=lambda *_: None)

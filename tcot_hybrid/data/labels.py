@@ -8,6 +8,13 @@ lift cue ``z_m`` (TCP height above the table top, world z) and the commanded gri
   progress context; only points from the middle on (``k >= 0``) are sent to the executor.
 * Local trajectory at step t (eq. 5): samples ``t + n_l * k`` for ``k = 0 .. L_l`` (``L_l + 1`` points),
   clamped, with ``n_l < n_g``: short and dense.
+
+``global_spacing = "events"`` replaces eq. 4's fixed time stride by the demo's gripper events: from step t
+on, the path is cut at every gripper switch and each piece gets ``points_per_segment`` points at equal
+path-length fractions, its last point being the switch sample itself (the past half mirrors this). Point k
+then means the same thing in every scene of a task ("the 2nd grasp" is always point 12), where with a time
+stride it is wherever the demo happened to be 4k steps later: from one image the network cannot know a
+1-2 s long-horizon timing, and regression averaged far-future descents away (grasps closing in the air).
 """
 from __future__ import annotations
 
@@ -16,8 +23,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tcot_hybrid.config import require_int
+from tcot_hybrid.config import require_choice, require_int
 from tcot_hybrid.errors import ConfigError, DatasetError
+
+
+GLOBAL_SPACINGS = ("time", "events")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -32,16 +42,24 @@ class TrajectoryWindowConfig:
          point falls inside every 0.5 s (5-step) gripper pause, where the gripper bit flips.
     L_l: local trajectory length: L_l + 1 points from the current step on. Up: longer local horizon.
     n_l: stride between local points [steps], must be < n_g (local plans are denser). Down: denser.
+    global_spacing: "time" (eq. 4: every n_g steps) or "events" (points_per_segment points between
+         consecutive gripper switches, spaced by path length; see the module doc). n_g is used by "time" only.
+    points_per_segment: "events" only: points per path piece between gripper switches. (L_g // 2) /
+         points_per_segment pieces fit in the future half; the long suite has 4 switches (5 pieces, the last
+         a short retreat), so 6 fits all of them with 25 future points. Up: denser plans, fewer pieces fit.
     """
 
     L_g: int = 51
     n_g: int = 4
     L_l: int = 8
     n_l: int = 2
+    global_spacing: str = "time"
+    points_per_segment: int = 6
 
     def __post_init__(self) -> None:
-        for name in ("L_g", "n_g", "L_l", "n_l"):
+        for name in ("L_g", "n_g", "L_l", "n_l", "points_per_segment"):
             require_int(name, getattr(self, name), minimum=1)
+        require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
         if self.L_g % 2 != 1:
             raise ConfigError(f"L_g must be odd (k = -(L_g//2) .. L_g//2 has L_g points only then), got {self.L_g}")
         if not self.n_l < self.n_g:
@@ -65,12 +83,31 @@ class TrajectoryWindowConfig:
         return self.n_l * np.arange(self.L_l + 1)
 
 
+def windows_from_meta(w: dict) -> TrajectoryWindowConfig:
+    """The windows a checkpoint's metadata records. Checkpoints written before ``global_spacing`` existed
+    have no such key and were all trained on eq.-4 (time-spaced) windows."""
+    try:
+        return TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")},
+                                      global_spacing=str(w.get("global_spacing", "time")),
+                                      points_per_segment=int(w.get("points_per_segment",
+                                                                   TrajectoryWindowConfig.points_per_segment)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(f"checkpoint windows {w!r} are incomplete or not numbers: {exc}") from exc
+
+
 def _check_T(T: int) -> None:
     require_int("T (number of samples)", T, minimum=1)
 
 
+def _require_time_spacing(cfg: TrajectoryWindowConfig) -> None:
+    if cfg.global_spacing != "time":
+        raise ConfigError(f"eq.-4 indices need global_spacing = 'time', got {cfg.global_spacing!r}; event-spaced "
+                          "windows depend on the track: use global_labels(track, cfg)")
+
+
 def global_indices(T: int, t: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
     """(L_g,) sample indices of the global trajectory at step ``t`` of a T-sample demo (eq. 4), clamped."""
+    _require_time_spacing(cfg)
     _check_T(T)
     _check_t(T, t)
     return np.clip(t + cfg.global_offsets, 0, T - 1)
@@ -91,8 +128,55 @@ def _check_t(T: int, t: int) -> None:
 
 def global_index_table(T: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
     """(T, L_g) global indices for every step (row t = :func:`global_indices` (T, t))."""
+    _require_time_spacing(cfg)
     _check_T(T)
     return np.clip(np.arange(T)[:, None] + cfg.global_offsets[None, :], 0, T - 1)
+
+
+def _future_event_indices(cum_len: np.ndarray, switches: np.ndarray, t: int, n: int, per: int) -> np.ndarray:
+    """(n,) sample indices after ``t``: ``per`` points per piece between the switches after t (and the last
+    sample), at path-length fractions 1/per .. 1 of each piece; clamped to the last sample when they run out."""
+    T = len(cum_len)
+    ends = np.r_[switches[switches > t], T - 1]
+    out, start = [], t
+    for end in ends:
+        if end <= start:
+            continue
+        piece = cum_len[start:end + 1] - cum_len[start]
+        frac = np.arange(1, per + 1) / per
+        idx = start + np.searchsorted(piece, frac * piece[-1] - 1e-9, side="left")  # 1 nm: float sums of steps
+        idx[-1] = end  # the switch sample itself, whatever the rounding
+        out.extend(np.minimum(idx, end).tolist())
+        start = end
+        if len(out) >= n:
+            break
+    out = out[:n]
+    return np.array(out + [T - 1] * (n - len(out)), dtype=np.int64)
+
+
+def event_index_table(xyz_m: np.ndarray, gripper_closed: np.ndarray,
+                      cfg: TrajectoryWindowConfig) -> np.ndarray:
+    """(T, L_g) event-spaced global indices for every step (``global_spacing = "events"``, module doc): the
+    middle point is t, the future half has ``points_per_segment`` points per piece between gripper switches
+    (path-length spaced, ending on the switch sample: the first sample with the new gripper bit), and the
+    past half is the same built backwards in time."""
+    p = np.asarray(xyz_m, float)
+    g = np.asarray(gripper_closed, bool)
+    T = len(p)
+    h, per = cfg.L_g // 2, cfg.points_per_segment
+    step_len = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    cum = np.r_[0.0, np.cumsum(step_len)]
+    cum_rev = np.r_[0.0, np.cumsum(step_len[::-1])]
+    switches = np.flatnonzero(g[1:] != g[:-1]) + 1  # first sample with the new bit
+    # backwards in time, a piece ends on the last sample with the old bit: reversed index T - 1 - (s - 1) = T - s
+    switches_rev = np.sort(T - switches)
+    table = np.empty((T, cfg.L_g), dtype=np.int64)
+    for t in range(T):
+        table[t, h] = t
+        table[t, h + 1:] = _future_event_indices(cum, switches, t, h, per)
+        past = _future_event_indices(cum_rev, switches_rev, T - 1 - t, h, per)
+        table[t, :h] = (T - 1 - past)[::-1]
+    return table
 
 
 def local_index_table(T: int, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> np.ndarray:
@@ -107,11 +191,13 @@ class Track(NamedTuple):
     uv_px:          (T, 2) gripper pixel in the planner camera [px]
     z_m:            (T,) lift cue: TCP height above the table top (world z) [m]
     gripper_closed: (T,) commanded gripper state (True = closed)
+    xyz_m:          (T, 3) TCP position [m, world], or None; event-spaced global windows need it (path length)
     """
 
     uv_px: np.ndarray
     z_m: np.ndarray
     gripper_closed: np.ndarray
+    xyz_m: np.ndarray | None = None
 
 
 class WindowLabels(NamedTuple):
@@ -129,7 +215,7 @@ class WindowLabels(NamedTuple):
     gripper_closed: np.ndarray
 
 
-def make_track(uv_px, z_m, gripper_closed) -> Track:
+def make_track(uv_px, z_m, gripper_closed, xyz_m=None) -> Track:
     """Validated :class:`Track` (shapes agree, values finite)."""
     uv = np.asarray(uv_px, dtype=np.float32)
     z = np.asarray(z_m, dtype=np.float32)
@@ -141,7 +227,11 @@ def make_track(uv_px, z_m, gripper_closed) -> Track:
         raise DatasetError(f"track z_m and gripper_closed must have shape ({T},), got {z.shape} and {g.shape}")
     if not (np.isfinite(uv).all() and np.isfinite(z).all()):
         raise DatasetError("track uv_px / z_m contain non-finite values")
-    return Track(uv, z, g)
+    if xyz_m is not None:
+        xyz_m = np.asarray(xyz_m, dtype=np.float32)
+        if xyz_m.shape != (T, 3) or not np.isfinite(xyz_m).all():
+            raise DatasetError(f"track xyz_m must be finite with shape ({T}, 3), got {xyz_m.shape}")
+    return Track(uv, z, g, xyz_m)
 
 
 TRACK_KEYS = ("obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed")  # what a track is read from
@@ -149,7 +239,8 @@ TRACK_KEYS = ("obs/eef_uv_px", "obs/robot0_eef_pos", "obs/robot0_gripper_closed"
 
 def track_from_arrays(arrays: dict, *, uv_key: str = TRACK_KEYS[0]) -> Track:
     """Track of a demo read with :meth:`DemoFile.read`: exact TCP pixel (or ``uv_key``), TCP height, gripper."""
-    return make_track(arrays[uv_key], arrays[TRACK_KEYS[1]][:, 2], arrays[TRACK_KEYS[2]])
+    pos = arrays[TRACK_KEYS[1]]
+    return make_track(arrays[uv_key], pos[:, 2], arrays[TRACK_KEYS[2]], pos)
 
 
 def _gather(track: Track, idx: np.ndarray) -> WindowLabels:
@@ -157,7 +248,12 @@ def _gather(track: Track, idx: np.ndarray) -> WindowLabels:
 
 
 def global_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowConfig()) -> WindowLabels:
-    """Global trajectory labels (eq. 4) for every step of ``track``."""
+    """Global trajectory labels (eq. 4, or event-spaced: ``cfg.global_spacing``) for every step of ``track``."""
+    if cfg.global_spacing == "events":
+        if track.xyz_m is None:
+            raise DatasetError("event-spaced global windows need the track's TCP positions (xyz_m); got a track "
+                               "without them")
+        return _gather(track, event_index_table(track.xyz_m, track.gripper_closed, cfg))
     return _gather(track, global_index_table(len(track.uv_px), cfg))
 
 
@@ -171,6 +267,6 @@ def window_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowCo
     return global_labels(track, cfg), local_labels(track, cfg)
 
 
-__all__ = ["Track", "TrajectoryWindowConfig", "WindowLabels", "global_index_table", "global_indices",
+__all__ = ["GLOBAL_SPACINGS", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
            "global_labels", "local_index_table", "local_indices", "local_labels", "make_track",
-           "track_from_arrays", "window_labels"]
+           "track_from_arrays", "window_labels", "windows_from_meta"]

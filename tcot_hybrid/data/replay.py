@@ -24,7 +24,8 @@ import numpy as np
 
 from tcot_hybrid.config import require_nonnegative
 from tcot_hybrid.data.dataset import open_demos
-from tcot_hybrid.data.labels import TRACK_KEYS, TrajectoryWindowConfig, global_indices, track_from_arrays
+from tcot_hybrid.data.labels import (GLOBAL_SPACINGS, TRACK_KEYS, Track, TrajectoryWindowConfig, global_labels,
+                                     track_from_arrays)
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation, Planner
 from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
@@ -53,14 +54,14 @@ class LabelReplayPlanner(Planner):
     name = "label_replay"
     needs_image = False
 
-    def __init__(self, uv_px: np.ndarray, z_m: np.ndarray, gripper_closed: np.ndarray, camera, *,
-                 config: ReplayConfig, demo_seed: int):
+    def __init__(self, track: Track, camera, *, config: ReplayConfig, demo_seed: int):
         w = config.windows
-        idx = global_indices(len(uv_px), 0, w)[w.global_center:]
+        label = global_labels(track, w)
+        idx = label.indices[0, w.global_center:]
         rng = np.random.default_rng([config.noise_seed, demo_seed])
-        self.uv = uv_px[idx].astype(float) + rng.normal(0.0, config.noise_px, (len(idx), 2))
-        self.z = z_m[idx].astype(float) + rng.normal(0.0, config.noise_z_m, len(idx))
-        self.closed = np.asarray(gripper_closed)[idx].astype(bool)
+        self.uv = track.uv_px[idx].astype(float) + rng.normal(0.0, config.noise_px, (len(idx), 2))
+        self.z = track.z_m[idx].astype(float) + rng.normal(0.0, config.noise_z_m, len(idx))
+        self.closed = np.asarray(track.gripper_closed)[idx].astype(bool)
         self.camera, self.config = camera, config
 
     def plan(self, obs: Observation, *, mode: str):
@@ -68,7 +69,7 @@ class LabelReplayPlanner(Planner):
             raise PlanningError(f"label replay has only the t = 0 global label; asked for a {mode!r} plan at "
                                 f"step {obs.step} (run it with supervisor.mode = 'global')")
         return height_plan(self.camera, self.uv, self.z, self.closed, kind="global", step=0,
-                           config=self.config.learned)
+                           config=self.config.learned, global_spacing=self.config.windows.global_spacing)
 
 
 def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
@@ -87,7 +88,7 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
                     scene=replace(SceneConfig(), planner_camera=env["camera"], planner_image_px=int(env["width"])),
                     supervisor=replace(base.supervisor, mode="global"))
     runner = EpisodeRunner(cfg, planner_factory=lambda ctx: LabelReplayPlanner(
-        track.uv_px, track.z_m, track.gripper_closed, ctx.camera, config=config, demo_seed=info.seed))
+        track, ctx.camera, config=config, demo_seed=info.seed))
     rec = runner.run()
     return {"demo": name, "task": info.task, "seed": info.seed, "steps": len(track.uv_px), "success": rec["success"],
             "fault": rec["fault"]}
@@ -133,7 +134,8 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
     for c in per_task.values():
         c["success_rate"] = round(c["successes"] / c["demos"], 4)
     w = config.windows
-    return {"data": str(path), "L_g": w.L_g, "n_g": w.n_g, "noise_px": config.noise_px, "noise_z_m": config.noise_z_m,
+    return {"data": str(path), "L_g": w.L_g, "n_g": w.n_g, "global_spacing": w.global_spacing,
+            "points_per_segment": w.points_per_segment, "noise_px": config.noise_px, "noise_z_m": config.noise_z_m,
             "noise_seed": config.noise_seed, "per_task": per_task,
             "success_rate": round(sum(r["success"] for r in rows) / len(rows), 4), "demos": rows,
             "wall_s": round(time.perf_counter() - t0, 1)}
@@ -141,8 +143,10 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
 
 def markdown(report: dict) -> str:
     """Per-task table of a replay report, with the command that wrote it."""
+    spacing = (f"n_g = {report['n_g']}" if report.get("global_spacing", "time") == "time" else
+               f"event-spaced, {report['points_per_segment']} points per piece")
     lines = [f"Measured by `{report['command']}` ({len(report['demos'])} demos of `{report['data']}`, global window "
-             f"L_g = {report['L_g']}, n_g = {report['n_g']}, noise {report['noise_px']} px / {report['noise_z_m']} m):",
+             f"L_g = {report['L_g']}, {spacing}, noise {report['noise_px']} px / {report['noise_z_m']} m):",
              "", "| task | demos | label replay succeeded |", "|---|---|---|"]
     lines += [f"| {t} | {c['demos']} | {c['successes']} ({c['success_rate']:.0%}) |" for t, c in report["per_task"].items()]
     lines += ["", f"All: {report['success_rate']:.3f}."]
@@ -158,6 +162,10 @@ def cmd_replay(argv: list[str]) -> int:
     p.add_argument("--tasks", help="comma-separated task names (default: every task in the file)")
     p.add_argument("--L-g", dest="L_g", type=int, default=TrajectoryWindowConfig.L_g, help="global window length")
     p.add_argument("--n-g", dest="n_g", type=int, default=TrajectoryWindowConfig.n_g, help="global stride [steps]")
+    p.add_argument("--global-spacing", choices=GLOBAL_SPACINGS, default=TrajectoryWindowConfig.global_spacing,
+                   help="time: eq. 4, every n_g steps; events: points per piece between gripper switches")
+    p.add_argument("--points-per-segment", type=int, default=TrajectoryWindowConfig.points_per_segment,
+                   help="events spacing: points per piece between gripper switches")
     p.add_argument("--noise-px", type=float, default=0.0, help="Gaussian noise on every pixel [px]")
     p.add_argument("--noise-z-m", type=float, default=0.0, help="Gaussian noise on every TCP height [m]")
     p.add_argument("--noise-seed", type=int, default=0)
@@ -174,7 +182,8 @@ def cmd_replay(argv: list[str]) -> int:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     if args.n_g < 2:  # TrajectoryWindowConfig needs some local stride n_l < n_g; the replay uses no local window
         raise ConfigError(f"--n-g must be >= 2, got {args.n_g}")
-    windows = TrajectoryWindowConfig(L_g=args.L_g, n_g=args.n_g, L_l=1, n_l=1)
+    windows = TrajectoryWindowConfig(L_g=args.L_g, n_g=args.n_g, L_l=1, n_l=1, global_spacing=args.global_spacing,
+                                     points_per_segment=args.points_per_segment)
     cfg = ReplayConfig(windows=windows, noise_px=args.noise_px, noise_z_m=args.noise_z_m, noise_seed=args.noise_seed)
     tasks = [t for t in args.tasks.split(",") if t] if args.tasks else None
     report = replay_file(args.data, config=cfg, tasks=tasks, workers=args.workers)

@@ -222,13 +222,14 @@ def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: 
         command: str = "", stem: str | None = None) -> dict:
     from tcot_hybrid.learning.checkpoint import load_checkpoint
     from tcot_hybrid.learning.data import env_of, load_frames
+    from tcot_hybrid.data.labels import windows_from_meta
     from tcot_hybrid.learning.vocab import Vocabulary
 
     t0 = time.perf_counter()
     env, camera, _ = env_of(data)
     ck = load_checkpoint(checkpoint, robot=env["robot"], camera=camera)
     vocab = Vocabulary(tuple(ck.meta["vocabulary"]))
-    frames = load_frames(data, split, vocab, windows=_windows(ck.meta), max_tokens=ck.model.cfg.max_tokens,
+    frames = load_frames(data, split, vocab, windows=windows_from_meta(ck.meta["windows"]), max_tokens=ck.model.cfg.max_tokens,
                          direct_horizon=int(ck.meta.get("direct_horizon", 3)))
     report: dict = {"checkpoint": str(checkpoint), "data": str(data), "split": split, "kind": ck.meta["kind"],
                     "command": command}
@@ -246,13 +247,6 @@ def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: 
         (o / f"{stem}.json").write_text(json.dumps(report, indent=1) + "\n")
         (o / f"{stem}.md").write_text(markdown(report))
     return report
-
-
-def _windows(meta):
-    from tcot_hybrid.data.labels import TrajectoryWindowConfig
-
-    w = meta["windows"]
-    return TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")})
 
 
 def main(argv: list[str] | None = None) -> int:

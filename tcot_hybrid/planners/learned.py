@@ -43,9 +43,10 @@ class LearnedPlannerConfig:
                       ``dwell_leave_m`` away) is moved to the nearest waypoint within ``switch_window`` where the
                       arm dwells (the next waypoint closer than ``dwell_step_m``) [m]. Every demonstration
                       switches where the arm has stopped (it waits ``gripper_settle_s``); a far-future release
-                      predicted one waypoint early let go of the stick half-way through the drag. Global plans
-                      only: local plans span 1.6 s, where the heads hardly disagree on timing. dwell_leave_m
-                      None = off. Down: moves more switches.
+                      predicted one waypoint early let go of the stick half-way through the drag. Time-spaced
+                      (eq. 4) global plans only: local plans span 1.6 s, where the heads hardly disagree on
+                      timing, and event-spaced plans end every piece on its switch and show no dwells.
+                      dwell_leave_m None = off. Down: moves more switches.
     min_height_m:     a plan with a waypoint's TCP height below this is refused (``PlanningError``), not
                       executed [m]: the fingers would be inside the table (top at z = 0). Demonstrated grasps
                       are at 1-2 cm; late in failed episodes the local prompt was seen to answer -0.5 m.
@@ -120,16 +121,20 @@ def align_switches_to_dwells(points: np.ndarray, closed: np.ndarray, *, window: 
 
 
 def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
-                step: int, config: LearnedPlannerConfig, meta: dict | None = None) -> WaypointPlan:
+                step: int, config: LearnedPlannerConfig, global_spacing: str, meta: dict | None = None) -> WaypointPlan:
     """The plan for waypoints given as pixel + TCP height + gripper bit (the learned planner's output form):
     ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
-    and, in global plans, to where the arm dwells."""
+    and, in time-spaced global plans (``global_spacing`` of the windows the points follow), to where the arm
+    dwells."""
     try:
         depth = depth_at_height(camera, uv_px, z_m)
     except LiftError as exc:
         raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
-    closed = align_gripper_switches(z_m, closed, window=config.switch_window, min_rise_m=config.switch_min_rise_m)
-    if kind == "global" and config.dwell_leave_m is not None:
+    if kind == "global" and global_spacing == "events":
+        pass  # every piece ends on its switch by construction: no timing slip to correct
+    else:
+        closed = align_gripper_switches(z_m, closed, window=config.switch_window, min_rise_m=config.switch_min_rise_m)
+    if kind == "global" and global_spacing == "time" and config.dwell_leave_m is not None:
         closed = align_switches_to_dwells(camera.unproject(uv_px, depth), closed, window=config.switch_window,
                                           leave_m=config.dwell_leave_m, dwell_m=config.dwell_step_m)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
@@ -247,11 +252,11 @@ class LearnedPlanner(NetworkPlanner):
 
     def __init__(self, checkpoint, camera: CameraModel, *, config: LearnedPlannerConfig = LearnedPlannerConfig()):
         super().__init__(checkpoint, camera)
-        from tcot_hybrid.data.labels import TrajectoryWindowConfig
+        from tcot_hybrid.data.labels import windows_from_meta
 
         self.config = config
         w = self.meta["windows"]
-        self.windows = TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")})
+        self.windows = windows_from_meta(w)
         if self.windows.L_g != self.cfg.n_global or self.windows.L_l + 1 != self.cfg.n_local:
             raise PlanningError(f"checkpoint windows {w} do not match its model ({self.cfg.n_global} global, "
                                 f"{self.cfg.n_local} local waypoints)")
@@ -276,7 +281,7 @@ class LearnedPlanner(NetworkPlanner):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
         check_outputs(uv, z, prob, min_height_m=self.config.min_height_m)
         return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
-                           meta={"z_m": z, "gripper_prob": prob})
+                           global_spacing=self.windows.global_spacing, meta={"z_m": z, "gripper_prob": prob})
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""
