@@ -220,17 +220,17 @@ def markdown(r: dict) -> str:
 
 def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: str | Path | None = None,
         command: str = "", stem: str | None = None) -> dict:
+    from tcot_hybrid.data.labels import windows_from_meta
     from tcot_hybrid.learning.checkpoint import load_checkpoint
     from tcot_hybrid.learning.data import env_of, load_frames
-    from tcot_hybrid.data.labels import windows_from_meta
     from tcot_hybrid.learning.vocab import Vocabulary
 
     t0 = time.perf_counter()
     env, camera, _ = env_of(data)
     ck = load_checkpoint(checkpoint, robot=env["robot"], camera=camera)
     vocab = Vocabulary(tuple(ck.meta["vocabulary"]))
-    frames = load_frames(data, split, vocab, windows=windows_from_meta(ck.meta["windows"]), max_tokens=ck.model.cfg.max_tokens,
-                         direct_horizon=int(ck.meta.get("direct_horizon", 3)))
+    frames = load_frames(data, split, vocab, windows=windows_from_meta(ck.meta["windows"]),
+                         max_tokens=ck.model.cfg.max_tokens, direct_horizon=int(ck.meta.get("direct_horizon", 3)))
     report: dict = {"checkpoint": str(checkpoint), "data": str(data), "split": split, "kind": ck.meta["kind"],
                     "command": command}
     if ck.meta["kind"] == "direct":
