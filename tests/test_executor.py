@@ -110,3 +110,30 @@ def test_executor_squares_sampled_tracks_but_not_a_direct_action():
         assert ex.events[-1]["corners_added"] == corners, kind
         assert len(ex.points) == 1 + corners
         np.testing.assert_allclose(ex.points[-1], far_low, atol=1e-9)
+
+
+def test_moves_into_and_out_of_a_gripper_switch_are_squared_from_a_smaller_offset():
+    # a place descent 2 cm to the side (under the 6 cm transit threshold), then a lift 1 cm to the side
+    start, points, grip = [0.40, 0.10, 0.18], [[0.40, 0.12, 0.04], [0.41, 0.12, 0.15]], [False, False]
+    plain, _ = square(start, True, points, grip)
+    np.testing.assert_array_equal(plain, np.asarray(points))  # the transit rule alone leaves both alone
+    pts, g = square_transits(np.asarray(start), True, np.asarray(points), np.asarray(grip), min_horizontal_m=H,
+                             min_vertical_m=V, switch_min_horizontal_m=0.005)
+    # straight down onto the place point, straight up out of it, then over
+    np.testing.assert_allclose(pts, [[0.40, 0.12, 0.18], [0.40, 0.12, 0.04], [0.40, 0.12, 0.15], [0.41, 0.12, 0.15]])
+    assert g.tolist() == [True, False, False, False]  # released at the planned point, not above it
+    # a segment between two points with the same gripper bit keeps the transit threshold
+    mid = [[0.40, 0.12, 0.10], [0.41, 0.13, 0.04]]
+    pts, _ = square_transits(np.asarray(start), True, np.asarray(mid), np.array([True, True]), min_horizontal_m=H,
+                             min_vertical_m=V, switch_min_horizontal_m=0.005)
+    np.testing.assert_array_equal(pts, np.asarray(mid))
+
+
+def test_switch_threshold_is_checked_and_can_be_switched_off():
+    with pytest.raises(ConfigError, match="switch_min_horizontal_m"):
+        ExecutorConfig(switch_min_horizontal_m=0.0)
+    assert ExecutorConfig(switch_min_horizontal_m=None).switch_min_horizontal_m is None
+    start, points = np.array([0.40, 0.10, 0.18]), np.array([[0.40, 0.12, 0.04]])
+    pts, _ = square_transits(start, True, points, np.array([False]), min_horizontal_m=None, min_vertical_m=V,
+                             switch_min_horizontal_m=None)
+    np.testing.assert_array_equal(pts, points)

@@ -311,6 +311,24 @@ def test_dwell_alignment_applies_to_time_spaced_global_plans_only(camera):
     assert np.array_equal(plan("global", config=LearnedPlannerConfig(dwell_leave_m=None)).gripper_closed, g)
 
 
+def test_event_spaced_global_plans_keep_their_switches(camera):
+    """In an event-spaced global plan every switch ends its piece by construction; snapping it to the lowest
+    point nearby (a timing-slip fix for time-spaced plans) moved the tool task's release, at the end of a
+    drag, back to the drag's start."""
+    x = np.array([0.30, 0.40, 0.50, 0.42, 0.34, 0.34])
+    z = np.array([0.10, 0.05, -0.002, 0.0, 0.02, 0.10])  # down to the drag, drag, release 2 cm up, lift
+    g = np.array([1, 1, 1, 1, 0, 0], bool)
+    uv, _ = camera.project(np.c_[x, np.full(6, 0.06), z])
+    cfg = LearnedPlannerConfig()
+
+    def plan(kind, spacing):
+        return height_plan(camera, uv, z, g, kind=kind, step=0, config=cfg, global_spacing=spacing).gripper_closed
+
+    assert np.array_equal(plan("global", "events"), g)
+    assert np.flatnonzero(np.diff(plan("global", "time").astype(int))).tolist() == [1]  # snapped to z = -0.2 cm
+    assert np.flatnonzero(np.diff(plan("local", "events").astype(int))).tolist() == [1]  # local plans: eq. 5
+
+
 def test_learned_planner_config_validated():
     with pytest.raises(ConfigError, match="switch_window"):
         LearnedPlannerConfig(switch_window=-1)

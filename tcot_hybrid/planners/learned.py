@@ -37,6 +37,8 @@ class LearnedPlannerConfig:
                       future switch predicted one waypoint late closes the fingers half-way up after the
                       descent; in every demonstration grasps and releases happen at the bottom of a descent.
                       Up: corrects larger timing slips, but may pull a switch into a neighbouring descent.
+                      Local and time-spaced (eq. 4) global plans only: an event-spaced global plan ends every
+                      piece on its switch by construction.
     switch_min_rise_m: move a switch only when its waypoint is this much higher than that lowest one [m]
                       (horizontal pulls, e.g. a drawer, keep their switch). Down: moves more switches.
     dwell_leave_m, dwell_step_m: a global plan's switch that the arm leaves at once (the next waypoint more than
