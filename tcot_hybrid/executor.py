@@ -53,8 +53,8 @@ class ExecutorConfig:
                       stays below 0.08 rad (docs/eval-*); None = off.
     transit_min_horizontal_m, transit_min_vertical_m: a plan segment that moves more than both sideways and
                       up or down is split at a corner: move over, then lower (or raise, then move over), the
-                      sideways move at the higher end's height. Learned global plans are samples of a timed
-                      track, 0.4 s apart; a straight line between two of them cuts the corner of the
+                      sideways move at the higher end's height. Learned global plans are samples of a
+                      track (0.4 s or a piece's path fraction apart); a straight line between two cuts the corner of the
                       demonstration's lower-after-moving-over, and a carried cube swept diagonally into the
                       drawer's far wall and pushed the drawer shut (docs/planner.md, "Square transits").
                       Oracle plans are never split: their points are at most ``OracleConfig.spacing_m``

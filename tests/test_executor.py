@@ -78,7 +78,8 @@ def test_oracle_plans_are_never_squared():
         points = lift_waypoints(plan.uv_px, plan.depth_m, runner.stack.camera)
         cfg = ExecutorConfig()
         pts, _ = square_transits(runner.stack.sim.tcp_pos(), False, points, plan.gripper_closed,
-                                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m)
+                                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
+                                 switch_min_horizontal_m=cfg.switch_min_horizontal_m)
         assert len(pts) == len(points), task
         adopted = [e for e in runner.stack.executor.events if e["kind"] == "plan_adopted"]
         assert adopted[0]["corners_added"] == 0

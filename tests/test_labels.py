@@ -154,6 +154,19 @@ def test_event_windows_need_the_track():
         TrajectoryWindowConfig(global_spacing="distance")
     with pytest.raises(DatasetError, match="xyz_m"):
         make_track(np.zeros((10, 2)), np.zeros(10), g, np.zeros((9, 3)))
+    with pytest.raises(ConfigError, match="points_per_segment = 6 must be <= L_g // 2 = 4"):
+        TrajectoryWindowConfig(L_g=9, global_spacing="events", points_per_segment=6)
+
+
+def test_event_window_through_a_pause_and_back_to_back_switches():
+    # the arm holds still at samples 4-7 (the gripper closes at 6) and the gripper opens again at once at 7
+    x = 0.01 * np.array([0, 1, 2, 3, 4, 4, 4, 4, 5, 6, 7, 8], dtype=float)
+    xyz = np.c_[x, np.zeros(12), np.zeros(12)]
+    g = np.array([0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0], bool)
+    table = event_index_table(xyz, g, EVENTS)
+    # piece 0..6 has length 4 cm: its middle is the first sample at 2 cm; the zero-length piece 6..7 gives 6, 7
+    assert table[0, 5:].tolist() == [2, 6, 6, 7]
+    assert table[6, 5:].tolist() == [6, 7, 9, 11]  # at the grasp sample itself: the hold piece, then the rest
 
 
 def test_windows_from_checkpoint_metadata():
@@ -161,5 +174,11 @@ def test_windows_from_checkpoint_metadata():
     assert windows_from_meta(old) == TrajectoryWindowConfig()
     new = {**old, "global_spacing": "events", "points_per_segment": 5}
     assert windows_from_meta(new) == TrajectoryWindowConfig(global_spacing="events", points_per_segment=5)
-    with pytest.raises(ConfigError, match="incomplete"):
+    with pytest.raises(ConfigError, match="lack n_g, L_l, n_l"):
         windows_from_meta({"L_g": 51})
+    with pytest.raises(ConfigError, match="lack points_per_segment"):  # never a silent 6 for an event checkpoint
+        windows_from_meta({**old, "global_spacing": "events"})
+    with pytest.raises(ConfigError, match="L_g"):  # a float is refused, not truncated
+        windows_from_meta({**old, "L_g": 51.9})
+    with pytest.raises(ConfigError, match="global_spacing = 'event' is not valid; choose one of time, events"):
+        windows_from_meta({**old, "global_spacing": "event", "points_per_segment": 6})

@@ -327,6 +327,8 @@ def test_event_spaced_global_plans_keep_their_switches(camera):
     assert np.array_equal(plan("global", "events"), g)
     assert np.flatnonzero(np.diff(plan("global", "time").astype(int))).tolist() == [1]  # snapped to z = -0.2 cm
     assert np.flatnonzero(np.diff(plan("local", "events").astype(int))).tolist() == [1]  # local plans: eq. 5
+    with pytest.raises(ConfigError, match="global_spacing = 'event' is not valid; choose one of time, events"):
+        plan("global", "event")
 
 
 def test_learned_planner_config_validated():

@@ -12,7 +12,8 @@ lift cue ``z_m`` (TCP height above the table top, world z) and the commanded gri
 ``global_spacing = "events"`` replaces eq. 4's fixed time stride by the demo's gripper events: from step t
 on, the path is cut at every gripper switch and each piece gets ``points_per_segment`` points at equal
 path-length fractions, its last point being the switch sample itself (the past half mirrors this). Point k
-then means the same thing in every scene of a task ("the 2nd grasp" is always point 12), where with a time
+then means the same thing in every scene of a task (with 6 points per piece, the 2nd grasp is always point
+18), where with a time
 stride it is wherever the demo happened to be 4k steps later: from one image the network cannot know a
 1-2 s long-horizon timing, and regression averaged far-future descents away (grasps closing in the air).
 """
@@ -44,9 +45,10 @@ class TrajectoryWindowConfig:
     n_l: stride between local points [steps], must be < n_g (local plans are denser). Down: denser.
     global_spacing: "time" (eq. 4: every n_g steps) or "events" (points_per_segment points between
          consecutive gripper switches, spaced by path length; see the module doc). n_g is used by "time" only.
-    points_per_segment: "events" only: points per path piece between gripper switches. (L_g // 2) /
-         points_per_segment pieces fit in the future half; the long suite has 4 switches (5 pieces, the last
-         a short retreat), so 6 fits all of them with 25 future points. Up: denser plans, fewer pieces fit.
+    points_per_segment: "events" only: points per path piece between gripper switches, at most L_g // 2.
+         (L_g // 2) / points_per_segment pieces fit in the future half; the long suite has 4 switches (5
+         pieces, the last a short retreat), so with 6 the first four pieces take 24 of the 25 future points
+         and every switch is in the window. Up: denser plans, fewer pieces fit.
     """
 
     L_g: int = 51
@@ -60,6 +62,9 @@ class TrajectoryWindowConfig:
         for name in ("L_g", "n_g", "L_l", "n_l", "points_per_segment"):
             require_int(name, getattr(self, name), minimum=1)
         require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
+        if self.global_spacing == "events" and self.points_per_segment > self.L_g // 2:
+            raise ConfigError(f"points_per_segment = {self.points_per_segment} must be <= L_g // 2 = {self.L_g // 2} "
+                              "with global_spacing = 'events' (else the first switch falls outside the window)")
         if self.L_g % 2 != 1:
             raise ConfigError(f"L_g must be odd (k = -(L_g//2) .. L_g//2 has L_g points only then), got {self.L_g}")
         if not self.n_l < self.n_g:
@@ -85,14 +90,17 @@ class TrajectoryWindowConfig:
 
 def windows_from_meta(w: dict) -> TrajectoryWindowConfig:
     """The windows a checkpoint's metadata records. Checkpoints written before ``global_spacing`` existed
-    have no such key and were all trained on eq.-4 (time-spaced) windows."""
-    try:
-        return TrajectoryWindowConfig(**{k: int(w[k]) for k in ("L_g", "n_g", "L_l", "n_l")},
-                                      global_spacing=str(w.get("global_spacing", "time")),
-                                      points_per_segment=int(w.get("points_per_segment",
-                                                                   TrajectoryWindowConfig.points_per_segment)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"checkpoint windows {w!r} are incomplete or not numbers: {exc}") from exc
+    have no such key and were all trained on eq.-4 (time-spaced) windows; an event-spaced one must name its
+    ``points_per_segment``."""
+    required = ["L_g", "n_g", "L_l", "n_l"]
+    spacing = w.get("global_spacing", "time")
+    if spacing == "events":
+        required.append("points_per_segment")
+    missing = [k for k in required if k not in w]
+    if missing:
+        raise ConfigError(f"checkpoint windows {w!r} lack {', '.join(missing)}")
+    kw = {k: w[k] for k in required}  # ints are checked (not truncated) by TrajectoryWindowConfig
+    return TrajectoryWindowConfig(**kw, global_spacing=spacing)
 
 
 def _check_T(T: int) -> None:

@@ -3,8 +3,9 @@
 It runs the checkpointed network (see :mod:`tcot_hybrid.learning.model`) and turns its outputs into
 the same :class:`WaypointPlan` the oracle emits, so the classical half of the stack is unchanged:
 
-* global: the network predicts the whole eq.-4 window (L_g points, past and future); only the points
-  from the current step on (k >= 0) are returned, the past ones are the model's progress context;
+* global: the network predicts the whole global window (L_g points, past and future: eq. 4's time stride
+  or event-spaced, as the checkpoint's windows say); only the points from the current step on (k >= 0) are
+  returned, the past ones are the model's progress context;
 * local: all L_l + 1 points of the eq.-5 window;
 * every waypoint carries the predicted TCP height ``z_m`` [m]; the plan's ``depth_m`` is where the
   pixel's viewing ray meets the plane z = z_m (:func:`tcot_hybrid.camera.depth_at_height`).
@@ -128,6 +129,10 @@ def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed:
     ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
     and, in time-spaced global plans (``global_spacing`` of the windows the points follow), to where the arm
     dwells."""
+    from tcot_hybrid.config import require_choice
+    from tcot_hybrid.data.labels import GLOBAL_SPACINGS
+
+    require_choice("global_spacing", global_spacing, GLOBAL_SPACINGS)
     try:
         depth = depth_at_height(camera, uv_px, z_m)
     except LiftError as exc:
