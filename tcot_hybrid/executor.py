@@ -54,8 +54,8 @@ class ExecutorConfig:
     transit_min_horizontal_m, transit_min_vertical_m: a plan segment that moves more than both sideways and
                       up or down is split at a corner: move over, then lower (or raise, then move over), the
                       sideways move at the higher end's height. Learned global plans are samples of a
-                      track (0.4 s or a piece's path fraction apart); a straight line between two cuts the corner of the
-                      demonstration's lower-after-moving-over, and a carried cube swept diagonally into the
+                      track (0.4 s or a piece's path fraction apart); a straight line between two cuts the
+                      corner of the demonstration's lower-after-moving-over, and a carried cube swept diagonally into the
                       drawer's far wall and pushed the drawer shut (docs/planner.md, "Square transits").
                       Oracle plans are never split: their points are at most ``OracleConfig.spacing_m``
                       (4 cm) apart; nor are direct plans (one waypoint: the baseline's action, not a
@@ -170,7 +170,7 @@ class MotionExecutor:
             return False
         grip = np.asarray(plan.gripper_closed, bool)
         cfg = self.config
-        if plan.kind != "direct" and (cfg.transit_min_horizontal_m, cfg.switch_min_horizontal_m) != (None, None):
+        if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
             points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
                                            min_horizontal_m=cfg.transit_min_horizontal_m,
                                            min_vertical_m=cfg.transit_min_vertical_m,

@@ -1,10 +1,10 @@
 """Label replay: execute each demonstration's own global trajectory label as a frozen plan.
 
 The learned planner is trained to reproduce the global window at t = 0 (``L_g // 2 + 1`` points of the demo's
-TCP track: every ``n_g`` steps (eq. 4) or event-spaced, ``--global-spacing``) and its frozen-global success is bounded by how well that label itself
-solves the task when run through the real motion stack (lift → IK → Ruckig → controller). A time-sampled
-track cuts corners: the hook of the tool task came down on the cube in every replay while its clearance
-was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaussian noise on every point:
+TCP track: every ``n_g`` steps (eq. 4) or event-spaced, ``--global-spacing``), and its frozen-global success is
+bounded by how well that label itself solves the task when run through the real motion stack (lift → IK →
+Ruckig → controller). A time-sampled track cuts corners: the hook of the tool task came down on the cube in
+every replay while its clearance was 1.5 cm. ``tcot replay`` measures this ceiling per task, optionally with Gaussian noise on every point:
 
     tcot replay --data data/heldout_panda.hdf5 --out docs/planner-eval/replay.json --readme docs/planner.md
 
@@ -33,8 +33,8 @@ from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
 
 @dataclass(frozen=True, kw_only=True)
 class ReplayConfig:
-    """windows: the label windows (only the global ones matter: L_g, n_g or global_spacing/points_per_segment). noise_px / noise_z_m: standard deviation of the
-    Gaussian noise added to every replayed pixel [px] / TCP height [m] (0 = the exact label); seeded per demo
+    """windows: the label windows (only the global ones matter: L_g, n_g or global_spacing/points_per_segment).
+    noise_px / noise_z_m: standard deviation of the Gaussian noise added to every replayed pixel [px] / TCP height [m] (0 = the exact label); seeded per demo
     by ``noise_seed`` and the demo's seed."""
 
     windows: TrajectoryWindowConfig = TrajectoryWindowConfig()

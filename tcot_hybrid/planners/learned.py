@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from tcot_hybrid.camera import CameraModel, depth_at_height
+from tcot_hybrid.config import require_choice
+from tcot_hybrid.data.labels import GLOBAL_SPACINGS
 from tcot_hybrid.errors import LiftError, PlanningError
 from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.planners.base import MODES, Observation, Planner
@@ -129,19 +131,16 @@ def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed:
     ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
     and, in time-spaced global plans (``global_spacing`` of the windows the points follow), to where the arm
     dwells."""
-    from tcot_hybrid.config import require_choice
-    from tcot_hybrid.data.labels import GLOBAL_SPACINGS
-
     require_choice("global_spacing", global_spacing, GLOBAL_SPACINGS)
     try:
         depth = depth_at_height(camera, uv_px, z_m)
     except LiftError as exc:
         raise PlanningError(f"planner output cannot be lifted: {exc}") from exc
-    if kind == "global" and global_spacing == "events":
-        pass  # every piece ends on its switch by construction: no timing slip to correct
-    else:
+    # local plans follow eq. 5; an event-spaced global plan ends every piece on its switch: no timing slip to fix
+    time_spaced = kind != "global" or global_spacing == "time"
+    if time_spaced:
         closed = align_gripper_switches(z_m, closed, window=config.switch_window, min_rise_m=config.switch_min_rise_m)
-    if kind == "global" and global_spacing == "time" and config.dwell_leave_m is not None:
+    if kind == "global" and time_spaced and config.dwell_leave_m is not None:
         closed = align_switches_to_dwells(camera.unproject(uv_px, depth), closed, window=config.switch_window,
                                           leave_m=config.dwell_leave_m, dwell_m=config.dwell_step_m)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
