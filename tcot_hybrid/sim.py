@@ -186,6 +186,7 @@ class Simulation:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+        self.task.release_scene()
 
 
 def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:

@@ -279,6 +279,9 @@ class Task(ABC):
 
         return build_workcell_scene(robot, self.add_objects, config=scene, sim_dt=timing.sim_dt)
 
+    def release_scene(self) -> None:
+        """The simulation built from ``build_scene`` is closed (a LIBERO task keeps its scene for reuse)."""
+
     def set_episode(self, *, seed: int, init: str | None) -> None:
         """Choose how ``reset`` lays the scene out for the episode ``seed``: ``init`` is one of ``init_modes``
         (None: the first). Workcell tasks always sample a fresh layout from the seed."""
