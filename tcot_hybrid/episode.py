@@ -59,7 +59,13 @@ def validate_names(cfg: RunConfig) -> None:
     from tcot_hybrid.errors import ControllerError, unknown_name
     from tcot_hybrid.ik.base import check_ik_options, ik_backend, joint_bounds
 
-    make_task(cfg.task).set_episode(seed=cfg.seed, init=cfg.init)  # e.g. --init shipped on a workcell task
+    task = make_task(cfg.task)
+    task.set_episode(seed=cfg.seed, init=cfg.init)  # e.g. --init shipped on a workcell task
+    if cfg.scene.planner_camera not in task.cameras():
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(f"scene.planner_camera = {cfg.scene.planner_camera!r} is not a camera of task "
+                          f"{cfg.task!r}'s scene; choose one of {', '.join(task.cameras())}")
     robot = load_robot_spec(cfg.robot)
     if cfg.controller not in list_controllers():
         raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
