@@ -29,14 +29,19 @@ from tcot_hybrid.smoothing import SmoothingConfig
 from tcot_hybrid.supervision import SupervisorConfig
 
 STOP_ON = ("simulator", "detector")
+INIT_MODES = ("shipped", "sampled")
 
 
 @dataclass(frozen=True, kw_only=True)
 class RunConfig:
     """One episode: what to run (names) and how (component configs).
 
-    task/robot/controller/ik/planner: registry names (``tcot list`` shows them).
+    task/robot/controller/ik/planner: registry names (``tcot list`` shows them). robot "auto" = the task's
+        own robot: panda in the workcell, libero_panda on a LIBERO task (its scenes mount that Panda).
     seed: episode seed; the same seed and config give a bit-identical run.
+    init: how the episode's scene is laid out: "shipped" (a LIBERO task's shipped init state number
+        seed mod N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
+        task's default (LIBERO: shipped; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
     stop_on: what ends the episode before its time limit. "simulator" (default): the task's success predicate
         (privileged; what a benchmark uses). "detector": the planner's failure detector, once it has judged the
@@ -51,11 +56,12 @@ class RunConfig:
 
     task: str = "goal_cube_on_plate"
     seed: int = 0
-    robot: str = "panda"
+    robot: str = "auto"
     controller: str = "computed_torque"
     ik: str = "mink"
     planner: str = "oracle"
     checkpoint: str | None = None
+    init: str | None = None
     stop_on: str = "simulator"
     stop_hold_steps: int = 15
     controller_params: dict[str, float] = field(default_factory=dict)
@@ -77,6 +83,12 @@ class RunConfig:
         for name in ("task", "robot", "controller", "ik", "planner"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ConfigError(f"{name} must be a non-empty name, got {getattr(self, name)!r}")
+        if self.init is not None and self.init not in INIT_MODES:
+            raise ConfigError(f"init = {self.init!r} is not one of {', '.join(INIT_MODES)} (or null: the task's default)")
+        if self.robot == "auto":  # resolved once, so records and checkpoints name the robot that ran
+            from tcot_hybrid.tasks.registry import default_robot
+
+            object.__setattr__(self, "robot", default_robot(self.task))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
