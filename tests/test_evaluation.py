@@ -86,7 +86,8 @@ def test_never_fired_perturbations_are_marked_not_reported_as_perturbed_success(
     assert "not fired (n=3)" in row and "1.00 [" not in row
     assert f"`target_moved` on `goal_open_drawer`: fired in 0 of 3 episodes ({note})" in md
     assert "`target_moved` on `goal_cube_in_bowl`: fired in 2 of 3 episodes (x)" in md
-    assert "| target_moved | oracle (global) | 1.000 | [0.610, 1.000] | 6 | 2/6 |" in md  # pooled: fired in some
+    # pooled: the never-fired cell is left out of the rate (n = 3), the fired column counts every episode
+    assert "| target_moved | oracle (global) | 1.000 | [0.439, 1.000] | 3 | 2/6 |" in md
 
 
 def test_in_episode_auroc_counts_each_step_once():

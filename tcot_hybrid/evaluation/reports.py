@@ -2,8 +2,9 @@
 
 Success is written as the rate with its Wilson 95 % interval and n (``0.90 [0.60, 0.98] n=10``): at the
 n of these tables a normal-approximation ``± s.e.`` collapses to ``± 0.00`` at 0/n and n/n. A perturbed
-group in which the perturbation never fired is written ``not fired (n=…)`` instead of a rate: it measured
-the unperturbed task. Where it fired in only some episodes, the ``fired`` column says in how many.
+cell in which the perturbation never fired is written ``not fired (n=…)`` instead of a rate and left out of
+the averages (it measured the unperturbed task): an average's n counts only cells where it fired. The
+``fired`` column says in how many of all the perturbed episodes it fired.
 """
 from __future__ import annotations
 
@@ -13,17 +14,20 @@ from tcot_hybrid.metrics import wilson_interval
 
 
 class Rate:
-    """Pooled successes of a group of cells."""
+    """Pooled successes of a group of cells. Cells whose perturbation never fired are left out of the rate (they
+    measured the unperturbed task); ``fired`` still counts over every perturbed episode of the group."""
 
     def __init__(self, group: list[dict]):
-        self.k = sum(c["successes"] for c in group)
-        self.n = sum(c["episodes"] for c in group)
-        self.p = self.k / self.n if self.n else 0.0
-        self.lo, self.hi = wilson_interval(self.k, self.n)
         perturbed = [c for c in group if c.get("perturb", "none") != "none"]
         self.perturbed_n = sum(c["episodes"] for c in perturbed)
         self.fired = sum(c.get("perturbation_fired") or 0 for c in perturbed)
         self.premature = sum(c.get("premature_stops") or 0 for c in group)
+        counted = [c for c in group if c.get("perturb", "none") == "none" or c.get("perturbation_fired") != 0]
+        self.k = sum(c["successes"] for c in counted)
+        self.n = sum(c["episodes"] for c in counted)
+        self.p = self.k / self.n if self.n else 0.0
+        self.lo, self.hi = wilson_interval(self.k, self.n)
+        self.total_n = sum(c["episodes"] for c in group)
 
     @property
     def never_fired(self) -> bool:
@@ -31,7 +35,7 @@ class Rate:
 
     def text(self, digits: int = 2) -> str:
         if self.never_fired:
-            return f"not fired (n={self.n})"
+            return f"not fired (n={self.total_n})"
         return f"{self.p:.{digits}f} [{self.lo:.{digits}f}, {self.hi:.{digits}f}] n={self.n}"
 
     def fired_text(self) -> str:
