@@ -251,6 +251,7 @@ class EpisodeRunner:
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),
             "ik_failures": ex.ik_failures,
+            "plans_infeasible": ex.plans_infeasible,
             "tracking_reflexes": ex.tracking_reflexes,
             "safety": ex.safety.summary(),
             "events": ex.events + ex.safety.event_dicts(),

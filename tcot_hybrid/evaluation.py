@@ -161,7 +161,7 @@ def run_job(job: Job) -> dict:
         probe = c.supervisor.mode.startswith("glsr")
         rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
         rec.pop("config", None)
-        keep = ("supervisor", "detector", "perturbation", "sim_fault", "ik_not_converged", "plan_rejected",
+        keep = ("supervisor", "detector", "perturbation", "sim_fault", "ik_not_converged", "ik_plan_infeasible", "plan_rejected",
                 "scene_reset", "tracking_reflex", "reference_brake", "safety")
         rec["events"] = [e for e in rec["events"] if e["kind"] in keep or e["kind"].startswith("safety")]
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure
@@ -277,6 +277,8 @@ def aggregate(records: list[dict]) -> list[dict]:
                     mean_tracking_error_rad=_mean([r.get("max_tracking_error_rad") for r in recs]),
                     max_joint_limit_violation_rad=max(r.get("max_joint_limit_violation_rad", 0.0) for r in recs),
                     max_velocity_ratio=round(max(r.get("max_velocity_ratio", 0.0) for r in recs), 4),
+                    ik_not_converged=sum(int(r.get("ik_failures") or 0) for r in recs),
+                    plans_infeasible=sum(int(r.get("plans_infeasible") or 0) for r in recs),
                     failed_seeds=sorted(r["seed"] for r in recs if not r["success"]))
         cells.append(cell)
     return cells
@@ -345,6 +347,32 @@ def _rate(group: list[dict]) -> tuple[float, float, int]:
     return p, math.sqrt(p * (1 - p) / n) if n else 0.0, n
 
 
+def ik_table(cells: list[dict]) -> list[str]:
+    """Markdown lines comparing IK backends (only when an evaluation ran more than one): per robot and backend,
+    success, mean episode time, mean of the episodes' largest tracking error, IK failures, worst limit violation."""
+    if len({c["ik"] for c in cells}) < 2:
+        return []
+    groups: dict[tuple, list] = defaultdict(list)
+    for c in cells:
+        groups[(c["robot"], c["ik"])].append(c)
+    lines = ["", "#### IK backends", "",
+             "| robot | ik | success ± s.e. | n | mean episode time [s] | mean tracking error [rad] | "
+             "waypoints not converged | plans infeasible | max limit viol. [rad] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for (robot, ik), group in sorted(groups.items()):
+        p, se, n = _rate(group)
+
+        def weighted(key):
+            pairs = [(c[key], c["episodes"]) for c in group if c.get(key) is not None]
+            return round(sum(v * w for v, w in pairs) / sum(w for _, w in pairs), 4) if pairs else None
+
+        lines.append(f"| {robot} | {ik} | {p:.3f} ± {se:.3f} | {n} | {weighted('mean_episode_time_s')} | "
+                     f"{weighted('mean_tracking_error_rad')} | {sum(c.get('ik_not_converged', 0) for c in group)} | "
+                     f"{sum(c.get('plans_infeasible', 0) for c in group)} | "
+                     f"{max(c['max_joint_limit_violation_rad'] for c in group):.1e} |")
+    return lines
+
+
 def markdown(result: dict, *, with_cells: bool = True) -> str:
     """The evaluation as Markdown: every cell (optional), Table 1 and Table 4 forms, detector metrics."""
     cells = result["cells"]
@@ -374,6 +402,7 @@ def markdown(result: dict, *, with_cells: bool = True) -> str:
         avg = _rate([c for s in suites for c in by_suite.get(s, [])])
         lines.append("| " + " | ".join(key) + " | " + " | ".join(
             f"{v[0]:.3f} ± {v[1]:.3f}" if v else "–" for v in vals) + f" | {avg[0]:.3f} ± {avg[1]:.3f} |")
+    lines += ik_table(cells)
     # Table 4: ablation of planning modes (averaged over suites), per perturbation.
     abl: dict[tuple, list] = defaultdict(list)
     for c in cells:
