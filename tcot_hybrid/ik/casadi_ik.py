@@ -112,10 +112,10 @@ class CasadiChain:
             R_pl = R_par @ ca.SX(M.rotation)
             p_pl = p_par + R_par @ ca.SX(M.translation)
             if kind in _REVOLUTE_AXES or kind == "JointModelRevoluteUnaligned":
-                axis = np.asarray(_REVOLUTE_AXES.get(kind, None) or jm.axis, dtype=float)
+                axis = np.asarray(_REVOLUTE_AXES[kind] if kind in _REVOLUTE_AXES else jm.extract().axis, dtype=float)
                 R_j, p_j = R_pl @ _axis_rotation(axis / np.linalg.norm(axis), qj), p_pl
             elif kind in _PRISMATIC_AXES or kind == "JointModelPrismaticUnaligned":
-                axis = np.asarray(_PRISMATIC_AXES.get(kind, None) or jm.axis, dtype=float)
+                axis = np.asarray(_PRISMATIC_AXES[kind] if kind in _PRISMATIC_AXES else jm.extract().axis, dtype=float)
                 R_j, p_j = R_pl, p_pl + R_pl @ ca.SX(axis / np.linalg.norm(axis)) * qj
             else:
                 raise RobotModelError(f"casadi FK does not support joint {model.names[j]!r} of robot {spec.name!r} "
@@ -285,7 +285,8 @@ class CasadiIK(IKSolver):
     def _check_range(self, P: np.ndarray) -> None:
         """Refuse targets absurdly far from the base (> 10x the arm's reach): a unit or frame mistake, not a plan."""
         limit = _RANGE_FACTOR * self.chain.reach_m
-        dist = np.linalg.norm(P - self.chain.base_m, axis=1)
+        with np.errstate(over="ignore"):  # a 1e300 m target: inf, refused below
+            dist = np.linalg.norm(P - self.chain.base_m, axis=1)
         bad = np.flatnonzero(~(dist <= limit))
         if bad.size:
             i = int(bad[0])
