@@ -314,6 +314,7 @@ COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromli
 COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
 COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist=["_"]).cmd_replay(argv)
 COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
+COMMANDS["ik-plans"] = lambda argv: __import__("tcot_hybrid.ik.plan_study", fromlist=["_"]).cmd_ik_plans(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

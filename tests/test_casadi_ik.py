@@ -279,7 +279,7 @@ def test_a_solver_claiming_success_with_a_wrong_answer_is_not_believed(monkeypat
     def lying(built, X0, params):
         return np.tile(home, (len(X0), 1)), "Solve_Succeeded", 1  # "solved", but home is not on the targets
 
-    monkeypatch.setattr(ik, "_warm", None)
+    monkeypatch.setattr(ik, "_warm_starts", ("current",))
     monkeypatch.setattr(ik, "_run", lying)
     res = ik.solve_plan(P, R, home)
     assert res.status == INFEASIBLE and set(res.offending) == {0, 1} and res.solver_status == "Solve_Succeeded"
@@ -299,8 +299,9 @@ def test_a_solver_claiming_success_with_a_wrong_answer_is_not_believed(monkeypat
     assert res.status == "non_finite" and inside(ik, res.q)
 
 
-def test_iteration_cap_is_reported_as_max_iters():
-    ik = solver("panda", max_iters=1, warm_start="current")
+def test_iteration_cap_is_reported_as_max_iters(monkeypatch):
+    ik = make_ik("casadi", spec("panda"), IKConfig(casadi=CasadiConfig(max_iters=1, warm_start="current")))
+    monkeypatch.setattr(ik, "_warm_starts", ("current",))  # (the per-waypoint chain alone would meet these targets)
     P = np.array([[0.3, 0.3, 0.1], [0.6, -0.3, 0.1]])
     res = ik.solve_plan(P, np.broadcast_to(R_DOWN, (2, 3, 3)), spec("panda").home_q)
     assert res.status == "max_iters" and not res.converged and inside(ik, res.q)
@@ -422,3 +423,20 @@ def test_plans_are_solved_at_adoption_never_inside_the_control_tick(monkeypatch)
     rec = runner.run()
     assert rec["success"] and calls["plan"] >= 1 and calls["in_tick"] == 0
     assert rec["max_joint_limit_violation_rad"] == 0.0 and rec["plans_infeasible"] == 0
+
+
+def test_a_yawed_plan_per_waypoint_ik_cannot_finish_is_solved_whole():
+    """ur5e, yawed pick-and-place plan of seed 503 (docs/ik-plans): the per-waypoint chains end in a wrist-limit
+    corner at the place (waypoints 3-5 not converged); the whole-plan solve picks a branch that reaches them all."""
+    from tcot_hybrid.ik.plan_study import compare_plan, yawed_plan
+
+    P, R = yawed_plan(503)
+    solvers = {name: make_ik(name, spec("ur5e")) for name in ("mink", "pinocchio", "casadi")}
+    row = compare_plan(solvers, {"source": "yawed", "task": "-", "seed": 503, "positions": P, "rotations": R,
+                                 "q_start": spec("ur5e").home_q.copy()})
+    assert row["mink"]["not_converged"] and row["pinocchio"]["not_converged"]
+    assert row["casadi"]["status"] == CONVERGED and row["casadi"]["max_pos_err_m"] <= 1e-3
+    res = solvers["casadi"].solve_plan(P, R, spec("ur5e").home_q)
+    for i in range(len(P)):  # checked in MuJoCo
+        p, Rq = mj_fk("ur5e", res.q[i])
+        assert np.linalg.norm(p - P[i]) <= 1e-3 + 1e-6 and rotation_angle(Rq, R[i]) <= 1e-2 + 1e-6

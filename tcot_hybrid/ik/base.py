@@ -86,10 +86,10 @@ class CasadiConfig:
                         Up: fewer plans given up; down: bounded solve time.
     tol:                [-] IPOPT's convergence tolerance (scaled KKT error). Down: more accurate optimum
                         of the cost (the targets are constraints either way), more iterations.
-    warm_start:         initial guess: "current" (every waypoint at the start configuration),
-                        "pinocchio" or "mink" (that backend's per-waypoint solutions, chained). The
-                        per-waypoint guess converges in fewer iterations; "current" does not inherit its
-                        arm branch.
+    warm_start:         first initial guess: "current" (every waypoint at the start configuration),
+                        "pinocchio" or "mink" (that backend's per-waypoint solutions, chained). When the
+                        solve from it fails, the other kind is tried once ("current" <-> the chain): they
+                        reach different arm branches and each solves plans the other does not.
     max_waypoints:      largest plan accepted (bounds the NLP size and memory).
     max_time_s:         [s] wall-clock cap per IPOPT solve; None = none (runs stay reproducible: only
                         max_iters bounds the work).

@@ -16,8 +16,10 @@ on PyPI ships without ``pinocchio.casadi``: stack-of-tasks/pinocchio#2759.) IPOP
 derivatives from the expression graph.
 
 IPOPT's return status is always checked, and so is the answer: the targets, the limits and the height
-bound are re-evaluated numerically on the returned configurations. When the first solve fails either
-check, a second solve minimises the tolerance-normalised pose errors under the same limits and height
+bound are re-evaluated numerically on the returned configurations. When the first solve (from the
+configured warm start) fails either check, the same problem is solved from the other kind of warm start
+(the per-waypoint chain and "every waypoint at the start configuration" lead to different arm branches),
+and then a last solve minimises the tolerance-normalised pose errors under the same limits and height
 bound: if it meets every target, its configurations are used; otherwise the plan is reported
 infeasible, naming the waypoints that cannot be met and how far off the closest configuration stays.
 Returned configurations are always finite and inside the limit box.
@@ -172,7 +174,7 @@ class PlanIKResult(NamedTuple):
     offending:     waypoint indices whose targets are not met (empty when converged), worst first.
     limit_active:  (N,) a joint sits at the limit box (with margin) at that waypoint.
     solve_time_s:  wall time of the whole call [s].
-    fallback:      the first solve failed and the second (pose-error) solve produced ``q``.
+    fallback:      the first solve (from the configured warm start) failed and a later one produced ``q``.
     """
 
     q: np.ndarray
@@ -211,10 +213,13 @@ class CasadiIK(IKSolver):
         super().__init__(spec, config)
         self.chain = casadi_chain(spec)
         self._solvers: OrderedDict[tuple[int, str], tuple[ca.Function, np.ndarray, np.ndarray]] = OrderedDict()
-        self._warm: IKSolver | None = None
-        cc = self.config.casadi
-        if cc.warm_start != "current":
-            self._warm = make_ik(cc.warm_start, spec, self.config)
+        # Warm starts in the order tried: the configured one, then the other kind (the per-waypoint chain and
+        # "every waypoint at the start configuration" reach different arm branches; each solves plans the other
+        # does not: docs/ik-plans). A per-waypoint chain uses the configured backend, or pinocchio.
+        first = self.config.casadi.warm_start
+        chain_backend = first if first != "current" else "pinocchio"
+        self._chain_ik = make_ik(chain_backend, spec, self.config)
+        self._warm_starts = (first, "current" if first != "current" else "pinocchio")
         # 1 + 2 cos(rot_tol): trace(R_target^T R) above this <=> rotation error <= rot_tol_rad.
         self._trace_min = 1.0 + 2.0 * math.cos(min(self.config.rot_tol_rad, math.pi))
 
@@ -352,15 +357,15 @@ class CasadiIK(IKSolver):
             self._solvers.popitem(last=False)
         return self._solvers[key]
 
-    def _warm_start(self, P: np.ndarray, R: np.ndarray, q0: np.ndarray) -> np.ndarray:
-        start = np.clip(q0, self.lower, self.upper)
-        if self._warm is None:
-            return np.tile(start, (len(P), 1))
+    def _warm_start(self, kind: str, P: np.ndarray, R: np.ndarray, q0: np.ndarray) -> np.ndarray:
+        """Initial guess: every waypoint at the (clipped) start configuration, or the per-waypoint chain."""
+        if kind == "current":
+            return np.tile(np.clip(q0, self.lower, self.upper), (len(P), 1))
         out, q = np.empty((len(P), self.dof)), q0
         for i in range(len(P)):
-            q = self._warm._solve(P[i], R[i], q.copy()).q
+            q = self._chain_ik._solve(P[i], R[i], q.copy()).q
             out[i] = q
-        return out
+        return np.clip(out, self.lower, self.upper)
 
     def _run(self, built, X0: np.ndarray, params: np.ndarray) -> tuple[np.ndarray | None, str, int]:
         """One IPOPT solve: (configurations or None on an evaluation error, return status, iterations)."""
@@ -396,12 +401,16 @@ class CasadiIK(IKSolver):
         q_post = self.posture_for(q0)
         params = np.concatenate([q0, q_post, [zs], P.reshape(-1),
                                  np.transpose(R, (0, 2, 1)).reshape(-1)])  # each rotation column-major
-        X0 = np.clip(self._warm_start(P, R, q0), self.lower, self.upper)
         iters_total = 0
-        tried: list[tuple[np.ndarray, str]] = [(X0, "warm_start")]
-        for kind in ("plan", "closest"):
-            start = tried[-1][0]
-            X, status, iters = self._run(self._solver(n, kind), start, params)
+        tried: list[tuple[np.ndarray, str]] = []
+        attempts = [("plan", kind) for kind in self._warm_starts] + [("closest", None)]
+        for attempt, (formulation, warm) in enumerate(attempts):
+            if warm is not None:
+                start = self._warm_start(warm, P, R, q0)
+                tried.append((start, "warm_start"))
+            else:  # the pose-error solve starts from the best configurations so far
+                start = min(tried, key=lambda t: self._rank(self._evaluate(t[0], P, R, zs)))[0]
+            X, status, iters = self._run(self._solver(n, formulation), start, params)
             iters_total += iters
             if X is None or not np.all(np.isfinite(X)):
                 tried.append((start, status if X is None else "non_finite"))
@@ -411,12 +420,12 @@ class CasadiIK(IKSolver):
             pos_err, rot_err, margin, limit_active, met = self._evaluate(X, P, R, zs)
             if np.all(met):  # IPOPT's status alone is never trusted: the answer was re-checked above
                 return PlanIKResult(X, CONVERGED, status, iters_total, pos_err, rot_err, margin, (),
-                                    limit_active, time.perf_counter() - t0, kind == "closest")
+                                    limit_active, time.perf_counter() - t0, attempt > 0)
         # Neither solve met every target: report the closest configurations found.
         best = None
-        for X, _ in tried:  # prefer configurations within the height bound, then the smallest total miss
+        for X, _ in tried:
             ev = self._evaluate(X, P, R, zs)
-            score = (bool(np.any(ev[2] < -_CHECK_SLACK)), float(np.sum(self._badness(*ev[:3]))))
+            score = self._rank(ev)
             if best is None or score < best[0]:
                 best = (score, X, ev)
         _, X, (pos_err, rot_err, margin, limit_active, met) = best
@@ -434,6 +443,10 @@ class CasadiIK(IKSolver):
         offending = tuple(int(i) for i in sorted(np.flatnonzero(~met), key=lambda i: -badness[i]))
         return PlanIKResult(X, status, closest_status, iters_total, pos_err, rot_err, margin, offending,
                             limit_active, time.perf_counter() - t0, True)
+
+    def _rank(self, ev) -> tuple[bool, float]:
+        """Order of candidate configurations: within the height bound first, then the smallest total miss."""
+        return bool(np.any(ev[2] < -_CHECK_SLACK)), float(np.sum(self._badness(*ev[:3])))
 
     def _badness(self, pos_err, rot_err, margin) -> np.ndarray:
         """Per-waypoint distance from meeting the target, in tolerances (0 = met)."""
