@@ -6,7 +6,6 @@ from __future__ import annotations
 import functools
 import types
 
-import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -15,6 +14,7 @@ from tcot_hybrid.errors import ConfigError, IKError
 from tcot_hybrid.ik import CONVERGED, INFEASIBLE, CasadiConfig, IKConfig, IKTarget, make_ik, rotation_angle
 from tcot_hybrid.ik.casadi_ik import CasadiChain
 from tcot_hybrid.robot import R_DOWN, build_pinocchio_model, load_robot_spec
+from test_ik import fk as mj_fk  # MuJoCo forward kinematics of the full robot model: the independent check
 
 ROBOTS = ("panda", "ur5e")
 LIMIT_TOL = 1e-9  # [rad] returned configurations are inside the box (IPOPT bounds + a final clip)
@@ -43,21 +43,6 @@ def pin_fk(robot: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pin.framesForwardKinematics(pr.model, data, qm)
     T = data.oMf[pr.tcp_frame_id]
     return T.translation.copy(), T.rotation.copy()
-
-
-@functools.cache
-def _mj(robot: str):
-    s = spec(robot)
-    m = mujoco.MjModel.from_xml_path(str(s.mjcf_path))
-    return m, mujoco.MjData(m), np.array([m.jnt_qposadr[m.joint(j).id] for j in s.arm_joints]), m.site(s.ee_site).id
-
-
-def mj_fk(robot: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    m, d, adr, sid = _mj(robot)
-    d.qpos[:] = m.qpos0
-    d.qpos[adr] = q
-    mujoco.mj_kinematics(m, d)
-    return d.site_xpos[sid].copy(), d.site_xmat[sid].reshape(3, 3).copy()
 
 
 def inside(ik, Q: np.ndarray) -> bool:
