@@ -248,11 +248,19 @@ class CasadiIK(IKSolver):
         return self._solve_plan(P, R, q0, zs)
 
     def _solve(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> IKResult:
+        """One waypoint as a plan of one (replaces the shared differential-IK iteration loop)."""
         self._check_range(pos[None, :])
         r = self._solve_plan(pos[None, :], rot[None, :, :], seed, self.config.casadi.support_z_m)
         status = r.status
         return IKResult(r.q[0].copy(), status == CONVERGED, status, r.iters, float(r.pos_err[0]),
                         float(r.rot_err[0]), bool(r.limit_active[0]))
+
+    def _tcp_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.chain.pose(q)
+
+    def _step(self, q, pos, rot, pos_err, rot_err):
+        """Not used: this backend solves for the configurations directly (``_solve`` replaces the loop)."""
+        raise NotImplementedError("the casadi backend has no differential-IK step; it solves whole plans")
 
     # -- input checks -------------------------------------------------------------------------------
 

@@ -217,7 +217,7 @@ def cmd_ik_plans(argv: list[str]) -> int:
     md = markdown(result, command)
     (args.out / "ik_plans.md").write_text(md)
     if args.readme:
-        from tcot_hybrid.bench import update_readme_section
+        from tcot_hybrid.markdown import update_readme_section
 
         update_readme_section(args.readme, "ik-plans", md)
     print(md)
