@@ -106,8 +106,8 @@ def _solvers(robot: str, config: IKConfig) -> dict:
     return {name: make_ik(name, spec, config) for name in PER_WAYPOINT + ("casadi",)}
 
 
-def study(robots: list[str], *, seed_start: int, seeds: int, sources=SOURCES, config: IKConfig | None = None,
-          progress: bool = True) -> dict:
+def study(robots: list[str], *, seed_start: int, seeds: int, yawed_seeds: int | None = None, sources=SOURCES,
+          config: IKConfig | None = None, progress: bool = True) -> dict:
     from tqdm import tqdm
 
     config = config or IKConfig()
@@ -118,14 +118,15 @@ def study(robots: list[str], *, seed_start: int, seeds: int, sources=SOURCES, co
         if "workcell" in sources:
             plans += workcell_plans(robot, range(seed_start, seed_start + seeds))
         if "yawed" in sources:
-            for seed in range(seed_start, seed_start + seeds):
+            for seed in range(seed_start, seed_start + (seeds if yawed_seeds is None else yawed_seeds)):
                 P, R = yawed_plan(seed)
                 plans.append({"source": "yawed", "task": "-", "seed": seed, "positions": P, "rotations": R,
                               "q_start": load_robot_spec(robot).home_q.copy()})
         for plan in tqdm(plans, desc=f"ik-plans {robot}", unit="plan", disable=not progress or None):
             rows.append({"robot": robot, **compare_plan(solvers, plan)})
     return {"rows": rows, "summary": summarize(rows), "config": dataclasses.asdict(config),
-            "seed_start": seed_start, "seeds": seeds, "robots": list(robots), "sources": list(sources)}
+            "seed_start": seed_start, "seeds": seeds, "yawed_seeds": seeds if yawed_seeds is None else yawed_seeds,
+            "robots": list(robots), "sources": list(sources)}
 
 
 def _pct(xs: list[float], q: float) -> float:
@@ -160,15 +161,16 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 
 def markdown(result: dict, command: str) -> str:
-    lines = [f"Measured by `{command}` (seeds {result['seed_start']}-{result['seed_start'] + result['seeds'] - 1} "
-             f"per task or plan; development seeds). Per-waypoint backends solve the waypoints in order, each seeded "
+    first = result["seed_start"]
+    lines = [f"Measured by `{command}` (development seeds: workcell {first}-{first + result['seeds'] - 1} per task, "
+             f"yawed plans {first}-{first + result['yawed_seeds'] - 1}). Per-waypoint backends solve the waypoints in order, each seeded "
              "from the last; casadi solves the plan jointly (warm start: "
              f"{result['config']['casadi']['warm_start']}).", "",
              "| robot | plans | waypoints | mink failed | mink at limit | pinocchio failed | pinocchio at limit | "
              "casadi converged | casadi at limit | helps: mink failed, casadi solved | helps: mink at limit, casadi "
              "solved clear of limits | hurts: mink solved, casadi not | helps: pinocchio failed, casadi solved | "
              "hurts: pinocchio solved, casadi not |",
-             "|" + "---|" * 15]
+             "|" + "---|" * 14]
     for s in result["summary"]:
         lines.append(f"| {s['robot']} / {s['source']} | {s['plans']} | {s['waypoints']} | {s['mink_failed']} | "
                      f"{s['mink_at_limit']} | {s['pinocchio_failed']} | {s['pinocchio_at_limit']} | "
@@ -196,7 +198,8 @@ def cmd_ik_plans(argv: list[str]) -> int:
     p.add_argument("--robots", default="panda,ur5e", help="comma-separated robots")
     p.add_argument("--sources", default=",".join(SOURCES), help=f"comma-separated plan sources: {', '.join(SOURCES)}")
     p.add_argument("--seed-start", type=int, default=2000, help="first seed (use development seeds)")
-    p.add_argument("--seeds", type=int, default=20, help="seeds per task (workcell) and yawed plans per robot")
+    p.add_argument("--seeds", type=int, default=20, help="seeds per task (workcell plans)")
+    p.add_argument("--yawed-seeds", type=int, default=None, help="yawed plans per robot (default: --seeds)")
     p.add_argument("--out", type=Path, default=Path("runs/ik-plans"))
     p.add_argument("--readme", type=Path, default=None, help="also write the tables into this Markdown file's "
                    "<!-- ik-plans:start/end --> section")
@@ -206,12 +209,13 @@ def cmd_ik_plans(argv: list[str]) -> int:
     bad = [s for s in sources if s not in SOURCES]
     if bad or not sources:
         raise ConfigError(f"--sources {args.sources!r}: unknown source(s) {bad}; valid sources: {', '.join(SOURCES)}")
-    if args.seeds < 1 or args.seed_start < 0:
-        raise ConfigError(f"--seeds must be >= 1 and --seed-start >= 0, got {args.seeds} and {args.seed_start}")
+    if args.seeds < 1 or args.seed_start < 0 or (args.yawed_seeds is not None and args.yawed_seeds < 1):
+        raise ConfigError(f"--seeds and --yawed-seeds must be >= 1 and --seed-start >= 0, got {args.seeds}, "
+                          f"{args.yawed_seeds} and {args.seed_start}")
     for r in robots:
         load_robot_spec(r)
     command = "tcot ik-plans " + " ".join(argv)
-    result = study(robots, seed_start=args.seed_start, seeds=args.seeds, sources=sources)
+    result = study(robots, seed_start=args.seed_start, seeds=args.seeds, yawed_seeds=args.yawed_seeds, sources=sources)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "ik_plans.json").write_text(json.dumps(result, indent=1))
     md = markdown(result, command)
