@@ -425,3 +425,19 @@ def test_a_yawed_plan_per_waypoint_ik_cannot_finish_is_solved_whole():
     for i in range(len(P)):  # checked in MuJoCo
         p, Rq = mj_fk("ur5e", res.q[i])
         assert np.linalg.norm(p - P[i]) <= 1e-3 + 1e-6 and rotation_angle(Rq, R[i]) <= 1e-2 + 1e-6
+
+
+def test_ik_plans_command_writes_counts_and_refuses_unknown_sources(tmp_path):
+    import json
+
+    from tcot_hybrid.ik.plan_study import cmd_ik_plans
+
+    out = tmp_path / "ikp"
+    assert cmd_ik_plans(["--robots", "ur5e", "--sources", "yawed", "--seed-start", "503", "--seeds", "1",
+                         "--out", str(out)]) == 0
+    result = json.loads((out / "ik_plans.json").read_text())
+    (s,) = result["summary"]
+    assert s["plans"] == 1 and s["mink_failed"] == 1 and s["helps_vs_mink_failed"] == 1 and s["hurts_vs_mink"] == 0
+    assert "helps: mink failed, casadi solved" in (out / "ik_plans.md").read_text()
+    with pytest.raises(ConfigError, match="valid sources: workcell, yawed"):
+        cmd_ik_plans(["--sources", "random", "--out", str(out)])
