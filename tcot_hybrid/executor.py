@@ -98,7 +98,7 @@ class ExecutorConfig:
 
 def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
                     min_horizontal_m: float | None, min_vertical_m: float,
-                    switch_min_horizontal_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    switch_min_horizontal_m: float | None = None, return_source: bool = False):
     """Waypoints with every diagonal segment split into a sideways and a vertical move, the sideways one at the
     higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
     that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
@@ -106,12 +106,13 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     than ``min_vertical_m`` up or down; None thresholds are off. ``start`` and ``start_closed``
     are the TCP and the gripper command now (the first segment's start). A corner keeps the gripper bit of its
     segment's start, so grasps and releases still happen at the planned points. Pure function; returns new
-    arrays."""
-    out_p, out_g = [], []
+    arrays, and with ``return_source`` also each output point's plan index (a corner's is its segment's end:
+    it takes that waypoint's orientation)."""
+    out_p, out_g, out_src = [], [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
     prev_is_switch = False
-    for p, g in zip(points, grip):
+    for i, (p, g) in enumerate(zip(points, grip)):
         is_switch = bool(g) != prev_g
         near_switch = is_switch or prev_is_switch
         thresholds = [t for t in (min_horizontal_m, switch_min_horizontal_m if near_switch else None) if t is not None]
@@ -122,9 +123,13 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
             corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
             out_p.append(corner)
             out_g.append(prev_g)
+            out_src.append(i)
         out_p.append(p)
         out_g.append(bool(g))
+        out_src.append(i)
         prev, prev_g, prev_is_switch = p, bool(g), is_switch
+    if return_source:
+        return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_src, int)
     return np.asarray(out_p), np.asarray(out_g, bool)
 
 
@@ -141,7 +146,8 @@ class MotionExecutor:
         self.events: list[dict] = []
         self.plan: WaypointPlan | None = None
         self.latest_points: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # last lifted plan per kind (videos)
-        self.points: np.ndarray = np.zeros((0, 3))
+        self.points: np.ndarray = np.zeros((0, 3))  # waypoints [m, world]
+        self.rots: np.ndarray = np.zeros((0, 3, 3))  # TCP orientation per waypoint [world]
         self.grip: np.ndarray = np.zeros(0, bool)
         self.index = -1
         self.phase = "idle"  # idle | move | settle | done
@@ -173,21 +179,24 @@ class MotionExecutor:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
         grip = np.asarray(plan.gripper_closed, bool)
+        rots = np.broadcast_to(R_DOWN, (len(plan), 3, 3)) if plan.tcp_rot is None else plan.tcp_rot
         cfg = self.config
         if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
-            points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                           min_horizontal_m=cfg.transit_min_horizontal_m,
-                                           min_vertical_m=cfg.transit_min_vertical_m,
-                                           switch_min_horizontal_m=cfg.switch_min_horizontal_m)
+            points, grip, source = square_transits(
+                self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
+                min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
+                switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
+            rots = rots[source]
+        rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q
         resync = np.max(np.abs(ref_q - q)) > self.config.resync_tol_rad
         plan_q = None
-        if getattr(self.ik, "solves_plans", False):  # whole-plan IK: every waypoint solved (or the plan refused) before any motion
-            plan_q = self._solve_plan(points, q if resync else self._ik_seed, plan)
+        if getattr(self.ik, "solves_plans", False):  # every waypoint solved (or the plan refused) before motion
+            plan_q = self._solve_plan(points, rots, q if resync else self._ik_seed, plan)
             if plan_q is None:
                 return False
-        self.plan, self.points, self.grip, self._plan_q = plan, points, grip, plan_q
+        self.plan, self.points, self.grip, self.rots, self._plan_q = plan, points, grip, rots, plan_q
         self.latest_points[plan.kind] = (points, self.grip)
         if resync:
             self.event("reference_resynced", max_dev_rad=float(np.max(np.abs(ref_q - q))))
@@ -202,14 +211,18 @@ class MotionExecutor:
         self._activate(0)
         return True
 
-    def _solve_plan(self, points: np.ndarray, q_start: np.ndarray, plan: WaypointPlan) -> np.ndarray | None:
+    def _solve_plan(self, points: np.ndarray, rots: np.ndarray, q_start: np.ndarray,
+                    plan: WaypointPlan) -> np.ndarray | None:
         """Joint targets of every waypoint from one whole-plan solve (IK backends with ``solve_plan``), or None:
         an infeasible plan is refused before any motion with an ``ik_plan_infeasible`` event naming the waypoint
         farthest from its target and how far off the closest reachable pose stays; the old plan is kept and
-        ``plans_infeasible`` tells the supervisor (GLSR replans on it)."""
-        rots = np.broadcast_to(R_DOWN, (len(points), 3, 3))  # workcell plans: top-down at every waypoint
+        ``plans_infeasible`` tells the supervisor (GLSR replans on it). ``points``/``rots`` are in the world frame;
+        the solve is in the robot's base frame, with the world's support surface as the height reference."""
+        T = self.sim.T_base_world
+        R_bw, p_bw = T[:3, :3], T[:3, 3]
+        support_z = float(R_bw[2] @ np.array([0.0, 0.0, self.sim.support_z]) + p_bw[2])  # base upright: a plane z
         try:
-            res = self.ik.solve_plan(points, rots, q_start)
+            res = self.ik.solve_plan(points @ R_bw.T + p_bw, R_bw @ rots, q_start, support_z=support_z)
         except TcotError as exc:  # unusable input (e.g. a point out of range): refused like an unliftable plan
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return None
@@ -238,7 +251,9 @@ class MotionExecutor:
             self._ik_seed = self._plan_q[i]
             self._set_target(self._plan_q[i], i)
             return
-        target = IKTarget(pos=self.points[i], rot=R_DOWN)
+        # Plans live in the world frame; IK solves in the robot's own base frame (identity in the workcell).
+        T = self.sim.T_base_world
+        target = IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=T[:3, :3] @ self.rots[i])
         try:
             res = self.ik.solve(target, self._ik_seed)
         except TcotError as exc:  # bad input: keep holding, report
@@ -297,11 +312,20 @@ class MotionExecutor:
     def reset_after_scene_reset(self) -> None:
         """The simulator was reset (arm at home): drop the plan and restart the reference there."""
         self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
+        self.rots = np.zeros((0, 3, 3))
         self.index, self.phase = -1, "idle"
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
         self.controller.reset(self.dyn, self._last_tau)
         self.event("scene_reset")
+
+    def resync_to_measured(self, reason: str) -> None:
+        """The arm was moved from outside (e.g. a perturbed initial posture): restart the reference, the IK seed
+        and the controller from the measured state, keeping the plan."""
+        self.smoother.reset(self.sim.q)
+        self._ik_seed = self.sim.q
+        self.controller.reset(self.dyn, self._last_tau)
+        self.event("reference_resynced", reason=reason)
 
     @property
     def plan_finished(self) -> bool:
