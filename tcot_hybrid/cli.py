@@ -316,6 +316,15 @@ COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist
 COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
 
 
+MAX_ERROR_CHARS = 2000
+"""Longest error text printed (a message that somehow echoes a huge value is cut, never streamed out)."""
+
+
+def bounded_message(exc: BaseException) -> str:
+    msg = str(exc)
+    return msg if len(msg) <= MAX_ERROR_CHARS else msg[:MAX_ERROR_CHARS - 40] + f" ... [{len(msg)} chars, cut]"
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
@@ -328,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return COMMANDS[name](rest)
     except TcotError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {bounded_message(exc)}", file=sys.stderr)
         return 2
 
 

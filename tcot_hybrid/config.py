@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.errors import ConfigError, short_repr
 
 
 def require_finite(field: str, value: Any) -> None:
@@ -19,41 +19,41 @@ def require_finite(field: str, value: Any) -> None:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:
-        raise ConfigError(f"{field} must be numeric, got {value!r}") from exc
+        raise ConfigError(f"{field} must be numeric, got {short_repr(value)}") from exc
     if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{field} must be finite, got {value!r}")
+        raise ConfigError(f"{field} must be finite, got {short_repr(value)}")
 
 
 def require_positive(field: str, value: Any) -> None:
     """Raise ConfigError unless ``value`` is a finite number (or array) strictly greater than zero."""
     if isinstance(value, bool):
-        raise ConfigError(f"{field} must be a positive number, got bool {value!r}")
+        raise ConfigError(f"{field} must be a positive number, got bool {short_repr(value)}")
     require_finite(field, value)
     if not np.all(np.asarray(value, dtype=float) > 0):
-        raise ConfigError(f"{field} must be > 0, got {value!r}")
+        raise ConfigError(f"{field} must be > 0, got {short_repr(value)}")
 
 
 def require_nonnegative(field: str, value: Any) -> None:
     """Raise ConfigError unless ``value`` is finite and >= 0."""
     if isinstance(value, bool):
-        raise ConfigError(f"{field} must be a number, got bool {value!r}")
+        raise ConfigError(f"{field} must be a number, got bool {short_repr(value)}")
     require_finite(field, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
-        raise ConfigError(f"{field} must be >= 0, got {value!r}")
+        raise ConfigError(f"{field} must be >= 0, got {short_repr(value)}")
 
 
 def require_int(field: str, value: Any, *, minimum: int | None = None) -> None:
     """Raise ConfigError unless ``value`` is an int (not bool) and >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ConfigError(f"{field} must be an integer, got {value!r} ({type(value).__name__})")
+        raise ConfigError(f"{field} must be an integer, got {short_repr(value)} ({type(value).__name__})")
     if minimum is not None and value < minimum:
-        raise ConfigError(f"{field} must be >= {minimum}, got {value!r}")
+        raise ConfigError(f"{field} must be >= {minimum}, got {short_repr(value)}")
 
 
 def require_choice(field: str, value: Any, choices: tuple[str, ...] | list[str]) -> None:
     """Raise ConfigError unless ``value`` is one of ``choices``."""
     if value not in choices:
-        raise ConfigError(f"{field} = {value!r} is not valid; choose one of {', '.join(map(str, choices))}")
+        raise ConfigError(f"{field} = {short_repr(value)} is not valid; choose one of {', '.join(map(str, choices))}")
 
 
 def whole_multiple(field: str, value: float, base_field: str, base: float) -> int:
@@ -68,6 +68,13 @@ def whole_multiple(field: str, value: float, base_field: str, base: float) -> in
             f"got ratio {ratio:.6g}"
         )
     return n
+
+
+TIMING_BOUNDS_S = {"sim_dt": (1e-5, 0.01), "ctrl_dt": (1e-4, 0.05), "plan_dt": (1e-3, 1.0)}
+"""Allowed range of each loop period [s]. Below: MuJoCo needs ~1e5 steps per simulated second and the
+settle loop alone runs for hours (1e-300 would need ~1e299 ticks); above: the physics of a stiff arm
+diverges (sim_dt), a sampled controller with the default gains goes unstable (ctrl_dt: sqrt(kp)
+ctrl_dt must stay well below 1), and the planner reacts slower than a second (plan_dt)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,7 +94,14 @@ class TimingConfig:
 
     def __post_init__(self) -> None:
         for name in ("sim_dt", "ctrl_dt", "plan_dt"):
-            require_positive(name, getattr(self, name))
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise ConfigError(f"{name} must be a number of seconds, got {short_repr(value)}")
+            require_positive(name, value)
+            lo, hi = TIMING_BOUNDS_S[name]
+            if not lo <= getattr(self, name) <= hi:
+                raise ConfigError(f"{name} = {getattr(self, name)!r} s is outside [{lo:g}, {hi:g}] s, the range "
+                                  f"MuJoCo and the controllers can use")
         whole_multiple("ctrl_dt", self.ctrl_dt, "sim_dt", self.sim_dt)
         whole_multiple("plan_dt", self.plan_dt, "ctrl_dt", self.ctrl_dt)
 
