@@ -94,7 +94,7 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     ik = make_ik(cfg.ik, robot, cfg.ik_params)
     executor = MotionExecutor(sim, ik=ik, smoother=smoother, controller=controller, safety=safety,
                               dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
-    ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name,
+    ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name, robot=robot,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint})
     planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx)
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)

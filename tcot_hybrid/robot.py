@@ -524,3 +524,26 @@ def _check_against_mujoco(robot: PinocchioRobot, m: mujoco.MjModel, idx: RobotIn
             if M_err > tol:
                 raise _err(spec.name, "mjcf", f"Pinocchio and MuJoCo mass matrices differ by {M_err:.3g}; "
                                               "give every body an explicit <inertial>")
+
+
+# --- identity and sanity checks (bring-your-own arm) ---------------------------------------------------
+
+def robot_model_digest(spec: RobotSpec) -> str:
+    """Hash of what a planner checkpoint depends on: the compiled robot model's kinematics and dynamics
+    (bodies, joints, sites, actuators; floats rounded to 1e-9) and the spec's arm joints and TCP site.
+    Checkpoints are matched to a robot by this hash, never by name: a different arm renamed ``panda``
+    has another digest; reformatting the MJCF or moving its folder keeps it."""
+    import hashlib
+
+    m = _compile(spec.name, spec.mjcf_path)
+    h = hashlib.sha256()
+    h.update(repr((spec.arm_joints, spec.ee_site, spec.gripper_joints)).encode())
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i) or "" for i in range(m.njnt)]
+    h.update(repr(names).encode())
+    for arr in (m.body_parentid, m.body_pos, m.body_quat, m.body_ipos, m.body_iquat, m.body_mass, m.body_inertia,
+                m.jnt_type, m.jnt_bodyid, m.jnt_axis, m.jnt_pos, m.jnt_range, m.dof_armature, m.dof_damping,
+                m.site_bodyid, m.site_pos, m.site_quat, m.actuator_trnid, m.actuator_gear, m.actuator_ctrlrange):
+        a = np.asarray(arr)
+        h.update(str(a.shape).encode())
+        h.update((np.round(a.astype(float), 9) + 0.0).tobytes() if a.dtype.kind == "f" else a.astype(np.int64).tobytes())
+    return h.hexdigest()[:16]

@@ -164,3 +164,154 @@ def test_row26_time_step_bounds_keep_the_defaults_and_the_tested_settings():
     TimingConfig()
     TimingConfig(sim_dt=0.001, ctrl_dt=0.002, plan_dt=0.1)
     TimingConfig(sim_dt=0.002, ctrl_dt=0.004, plan_dt=0.2)
+
+
+# --- row 25: relabelled or mismatched checkpoints -----------------------------------------------------
+
+def _copy_checkpoint(tmp: Path, stem: str = "panda_default") -> Path:
+    from tcot_hybrid.learning.checkpoint import checkpoints_dir
+
+    src = checkpoints_dir() / f"{stem}.safetensors"
+    dst = tmp / src.name
+    dst.write_bytes(src.read_bytes())
+    dst.with_suffix(".json").write_text(src.with_suffix(".json").read_text())
+    return dst
+
+
+def _edit_meta(path: Path, edit, *, restamp: bool) -> None:
+    from tcot_hybrid.learning.checkpoint import meta_path, stamp_metadata
+
+    meta = json.loads(meta_path(path).read_text())
+    edit(meta)
+    meta_path(path).write_text(json.dumps(stamp_metadata(meta) if restamp else meta))
+
+
+def _robot_copy(tmp: Path, bundled: str, name: str) -> Path:
+    """The bundled robot's folder copied to ``tmp/<name>`` with ``name = <name>`` in its robot.toml."""
+    from tcot_hybrid.robot import load_robot_spec
+
+    spec = load_robot_spec(bundled)
+    folder = tmp / f"{name}_from_{bundled}"
+    folder.mkdir()
+    toml = (spec.mjcf_path.parent / "robot.toml").read_text()
+    (folder / "robot.toml").write_text(toml.replace(f'name = "{bundled}"', f'name = "{name}"'))
+    (folder / spec.mjcf_path.name).write_text(spec.mjcf_path.read_text())
+    return folder / "robot.toml"
+
+
+@pytest.fixture()
+def count_steps(monkeypatch):
+    import tcot_hybrid.sim as sim_module
+
+    steps: list[int] = []
+    real = sim_module.Simulation.step1
+    monkeypatch.setattr(sim_module.Simulation, "step1", lambda self: steps.append(1) or real(self))
+    return steps
+
+
+def test_row25_relabelled_checkpoint_refused_before_the_first_step(tmp_path, count_steps):
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.errors import CheckpointError
+    from tcot_hybrid.run_config import RunConfig
+
+    def relabel(meta):
+        meta["robot"] = "ur5e"
+
+    cases = {}
+    for restamp in (False, True):  # edited by hand; edited and the metadata digest recomputed too
+        folder = tmp_path / f"restamp_{restamp}"
+        folder.mkdir()
+        path = _copy_checkpoint(folder)
+        _edit_meta(path, relabel, restamp=restamp)
+        with pytest.raises(CheckpointError) as exc:
+            EpisodeRunner(RunConfig(task="goal_cube_on_plate", robot="ur5e", planner="learned", checkpoint=str(path)))
+        cases[restamp] = str(exc.value)
+    assert "metadata_sha256" in cases[False]
+    assert "model digest" in cases[True]
+    assert not count_steps
+    print(f"\nrow 25: relabelled: {cases[False][-120:]}\nrow 25: relabelled + re-hashed: {cases[True][-160:]}")
+
+
+def test_row25_other_arm_named_panda_refused_same_arm_renamed_accepted(tmp_path, count_steps):
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.errors import CheckpointError
+    from tcot_hybrid.run_config import RunConfig
+
+    fake = _robot_copy(tmp_path, "ur5e", "panda")  # a UR5e whose robot.toml says "panda"
+    with pytest.raises(CheckpointError, match="model digest"):
+        EpisodeRunner(RunConfig(task="goal_cube_on_plate", robot=str(fake), planner="learned"))
+    assert not count_steps
+    same = _robot_copy(tmp_path, "panda", "my_panda")  # the Panda model under another name
+    ck = _copy_checkpoint(tmp_path)
+    EpisodeRunner(RunConfig(task="goal_cube_on_plate", robot=str(same), planner="learned", checkpoint=str(ck)))
+
+
+def test_row25_network_shapes_checked_against_the_run(tmp_path):
+    from tcot_hybrid.errors import CheckpointError
+    from tcot_hybrid.learning.checkpoint import load_checkpoint
+    from tcot_hybrid.robot import load_robot_spec, robot_model_digest
+
+    path = _copy_checkpoint(tmp_path)
+    ur5e = load_robot_spec("ur5e")
+
+    def for_ur5e(meta):  # a careful relabelling: the digest of the UR5e model, hashes recomputed
+        meta["robot"], meta["robot_model_digest"] = "ur5e", robot_model_digest(ur5e)
+
+    _edit_meta(path, for_ur5e, restamp=True)
+    with pytest.raises(CheckpointError, match="network takes 7 joints, robot 'ur5e' has 6"):
+        load_checkpoint(path, robot_spec=ur5e)
+
+    def image_size(meta):
+        meta["camera"]["width"] = meta["camera"]["height"] = 96
+
+    path = _copy_checkpoint(tmp_path)
+    _edit_meta(path, image_size, restamp=True)
+    with pytest.raises(CheckpointError, match="96x96 px but the network takes 128x128"):
+        load_checkpoint(path)
+
+    def windows(meta):
+        meta["windows"]["L_g"] = 31
+
+    path = _copy_checkpoint(tmp_path)
+    _edit_meta(path, windows, restamp=True)
+    with pytest.raises(CheckpointError, match="do not match the network"):
+        load_checkpoint(path)
+
+
+METADATA_CRASHES = {
+    "200k-deep nested JSON": None,  # written raw below
+    "windows as a list": lambda m: m.update(windows=[51, 4, 8, 2]),
+    "vocabulary of ints": lambda m: m.update(vocabulary=list(range(len(m["vocabulary"])))),
+    "vocabulary with None": lambda m: m["vocabulary"].__setitem__(3, None),
+    "string where a number belongs (windows)": lambda m: m["windows"].update(L_g="fifty-one"),
+    "string where a number belongs (model)": lambda m: m["model"].update(width="wide"),
+    "camera K of strings": lambda m: m["camera"].update(K=[["a"] * 3] * 3),
+    "camera width as a string": lambda m: m["camera"].update(width="128"),
+    "robot as a list": lambda m: m.update(robot=["panda"]),
+    "model as a list": lambda m: m.update(model=[1, 2]),
+    "max_unknown_fraction a string": lambda m: m.update(max_unknown_fraction="half"),
+    "global_spacing unknown": lambda m: m["windows"].update(global_spacing="sometimes"),
+}
+
+
+@pytest.mark.parametrize("restamp", [False, True])
+def test_row25_metadata_crashes_become_checkpoint_errors(tmp_path, restamp):
+    """Each used to escape as RecursionError / AttributeError / TypeError / ValueError (issue 18 item 7);
+    with the digest recomputed the type checks themselves refuse it."""
+    from tcot_hybrid.errors import CheckpointError
+    from tcot_hybrid.learning.checkpoint import load_checkpoint, meta_path
+    from tcot_hybrid.planners.learned import LearnedPlanner
+
+    for what, edit in METADATA_CRASHES.items():
+        path = _copy_checkpoint(tmp_path)
+        if edit is None:
+            meta_path(path).write_text('{"format": ' + "[" * 200_000 + "]" * 200_000 + "}")
+        else:
+            _edit_meta(path, edit, restamp=restamp)
+        try:
+            ck = load_checkpoint(path)
+            LearnedPlanner(ck, None)  # type: ignore[arg-type]  # what the planner reads at construction
+        except CheckpointError as exc:
+            assert len(str(exc)) < ERROR_CHARS, what
+            continue
+        pytest.fail(f"{what}: accepted")

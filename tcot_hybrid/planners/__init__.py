@@ -21,6 +21,7 @@ class PlannerContext:
     camera: CameraModel
     robot_name: str
     options: dict[str, Any]
+    robot: Any = None  # the run's RobotSpec: checkpoints are matched to it by model digest, not by name
 
 
 _FACTORIES: dict[str, Callable[[PlannerContext], Planner]] = {}

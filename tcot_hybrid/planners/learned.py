@@ -273,7 +273,7 @@ class LearnedPlanner(NetworkPlanner):
         from tcot_hybrid.planners import planner_checkpoint
 
         path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"))
-        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
+        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot)
         return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
 
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
