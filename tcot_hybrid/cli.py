@@ -132,6 +132,13 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
                          "python": platform.python_version()}}
 
 
+def outcome(record: dict) -> str:
+    """SUCCESS, failure, or the fault that ended the episode (``FAULT sim_fault:mjWARN_BADQACC``)."""
+    if record.get("success"):
+        return "SUCCESS"
+    return f"FAULT {record['fault']}" if record.get("fault") else "failure"
+
+
 def cmd_run(argv: list[str]) -> int:
     from tqdm import tqdm
 
@@ -142,6 +149,16 @@ def cmd_run(argv: list[str]) -> int:
     if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
                         "use --video out.mp4 to record the episode instead")
+    from tcot_hybrid.jsonio import check_output_dir, check_output_file
+
+    check_output_dir(cmd.out)  # an unusable --out, --video or --timeline is found now, not after the episode
+    if (cmd.out / "episode.json").is_dir():
+        from tcot_hybrid.errors import OutputError
+
+        raise OutputError(f"--out {str(cmd.out)!r} holds a directory named episode.json; the record cannot go there")
+    for flag, path in (("--video", cmd.video), ("--timeline", cmd.timeline)):
+        if path is not None:
+            check_output_file(path, what=flag)
     try:
         runner = EpisodeRunner(cmd.cfg)
     except BaseException as exc:  # refused or crashed before anything moved: the record says so
@@ -190,7 +207,7 @@ def cmd_run(argv: list[str]) -> int:
         if viewer:
             viewer.close()
     print(f"{record['task']} seed={record['seed']} robot={record['robot']} controller={record['controller']} "
-          f"ik={record['ik']} planner={record['planner']}: {'SUCCESS' if record['success'] else 'failure'} "
+          f"ik={record['ik']} planner={record['planner']}: {outcome(record)} "
           f"in {record['sim_time_s']:.1f}s sim / {record['wall_time_s']:.1f}s wall, "
           f"{len(record['events'])} events -> {path}" + (f", video {cmd.video}" if cmd.video else ""))
     return 0

@@ -218,7 +218,7 @@ class EpisodeRunner:
                 if s.task.success(s.sim.world):
                     self.success = True
                     break
-            self.success_time_s = float(s.sim.data.time) if self.success else None
+            self.success_time_s = s.sim.time_s if self.success else None
             for _ in range(steps_after_success if self.success else 0):
                 if probe_detector:
                     p = s.planner.success_probability(self.observe(step))
@@ -244,7 +244,7 @@ class EpisodeRunner:
             "mode": cfg.supervisor.mode, "seed": cfg.seed,
             "success": success, "fault": self.fault,
             "success_time_s": self.success_time_s if success else None,
-            "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
+            "sim_time_s": round(s.sim.time_s, 4), "wall_time_s": round(wall_time_s, 4),
             "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
@@ -264,9 +264,9 @@ class EpisodeRunner:
 
 
 def write_record(record: dict, out_dir: str | Path) -> Path:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "episode.json"
-    path.write_text(json.dumps(record, indent=2, default=_json_default))
-    return path
+    """Write ``out_dir/episode.json`` atomically (never cut off, never through a symlink)."""
+    from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
+
+    out = check_output_dir(out_dir) if not Path(out_dir).is_dir() else Path(out_dir)
+    return atomic_write_text(out / "episode.json", json.dumps(record, indent=2, default=_json_default))
 

@@ -49,6 +49,11 @@ class SimulationError(TcotError):
     """The simulator diverged or warned (MuJoCo auto-reset, bad accelerations)."""
 
 
+class OutputError(TcotError):
+    """An output location cannot take a record (read-only, an existing file where a folder belongs, a
+    directory where a file belongs, disk full). Checked before an episode; records are written atomically."""
+
+
 class DatasetError(TcotError):
     """A demonstration file is missing, truncated, corrupt or not in the expected layout."""
 

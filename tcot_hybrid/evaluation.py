@@ -25,6 +25,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from tcot_hybrid.errors import ConfigError, TcotError
+from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
 from tcot_hybrid.run_config import RunConfig, _coerce
 
 CELL_KEYS = ("task", "suite", "planner", "mode", "perturb", "robot", "controller", "ik", "sweep")
@@ -160,10 +161,7 @@ def run_job(job: Job) -> dict:
         runner = EpisodeRunner(c)
         probe = c.supervisor.mode.startswith("glsr")
         rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
-        rec.pop("config", None)
-        keep = ("supervisor", "detector", "perturbation", "sim_fault", "ik_not_converged", "plan_rejected",
-                "scene_reset", "tracking_reflex", "reference_brake", "safety")
-        rec["events"] = [e for e in rec["events"] if e["kind"] in keep or e["kind"].startswith("safety")]
+        rec.pop("config", None)  # every event `tcot run` records is kept: a failure is diagnosed without a re-run
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure
         rec = {"task": c.task, "planner": c.planner, "mode": c.supervisor.mode, "robot": c.robot,
                "controller": c.controller, "ik": c.ik, "seed": c.seed, "success": False,
@@ -214,8 +212,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
 
     from tcot_hybrid.tasks import make_task
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output_dir(out_dir)
     log = out / "episodes.jsonl"
     done = _done_keys(log)
     jobs = [dataclasses.replace(j, fixed_key=j.key) for j in jobs]  # hashed once, here: workers reuse it
@@ -246,8 +243,8 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     cells = aggregate(records)
     result = {"cells": cells, "episodes": len(records), "ran_now": len(todo), "wall_time_s": round(wall, 2),
               "workers": workers, "detector": detector_metrics(records)}
-    (out / "eval.json").write_text(json.dumps(result, indent=2))
-    (out / "eval.md").write_text(markdown(result))
+    atomic_write_text(out / "eval.json", json.dumps(result, indent=2))
+    atomic_write_text(out / "eval.md", markdown(result))
     return result
 
 

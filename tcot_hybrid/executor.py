@@ -158,7 +158,7 @@ class MotionExecutor:
 
     # --- events -----------------------------------------------------------------------------------
     def event(self, kind: str, **info) -> None:
-        self.events.append({"t": round(float(self.sim.data.time), 4), "kind": kind, **info})
+        self.events.append({"t": round(self.sim.time_s, 4), "kind": kind, **info})
 
     # --- plans ------------------------------------------------------------------------------------
     def set_plan(self, plan: WaypointPlan) -> bool:

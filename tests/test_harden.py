@@ -8,6 +8,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tcot_hybrid.config import TIMING_BOUNDS_S, TimingConfig
@@ -315,3 +316,283 @@ def test_row25_metadata_crashes_become_checkpoint_errors(tmp_path, restamp):
             assert len(str(exc)) < ERROR_CHARS, what
             continue
         pytest.fail(f"{what}: accepted")
+
+
+# --- row 24: output locations and records ----------------------------------------------------------------
+
+@pytest.fixture()
+def mount_tmpfs(tmp_path):
+    """Mount a small tmpfs (a real full or read-only disk); skipped where mounting is not permitted."""
+    import shutil as _sh
+
+    mounted: list[Path] = []
+
+    def mount(name: str, size: str = "1m", ro: bool = False) -> Path:
+        d = tmp_path / name
+        d.mkdir()
+        opts = f"size={size}" + (",ro" if ro else "")
+        if _sh.which("mount") is None or subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(d)],
+                                                       capture_output=True).returncode != 0:
+            pytest.skip("cannot mount a tmpfs here (needs root); the monkeypatched tests cover the same paths")
+        mounted.append(d)
+        return d
+
+    yield mount
+    for d in mounted:
+        subprocess.run(["umount", "-l", str(d)], capture_output=True)
+
+
+def _fill(folder: Path) -> None:
+    """Fill the file system holding ``folder`` to the last byte."""
+    with (folder / "filler").open("wb", buffering=0) as f:
+        for size in (65536, 4096, 512, 1):
+            try:
+                while True:
+                    f.write(b"\0" * size)
+            except OSError:
+                pass
+
+
+def _record(n_events: int = 3) -> dict:
+    return {"task": "t", "seed": 1, "success": True, "fault": None,
+            "events": [{"t": i * 0.1, "kind": "gripper", "closed": bool(i % 2)} for i in range(n_events)]}
+
+
+def test_row24_record_on_a_full_disk_keeps_the_previous_record(mount_tmpfs):
+    from tcot_hybrid.episode import write_record
+    from tcot_hybrid.errors import OutputError
+
+    disk = mount_tmpfs("full", size="256k")
+    path = write_record(_record(), disk)
+    before = path.read_bytes()
+    _fill(disk)
+    with pytest.raises(OutputError, match="disk is full.*previous file is left as it was"):
+        write_record(_record(n_events=20_000), disk)  # a much bigger record than the space left
+    assert path.read_bytes() == before and json.loads(before)["success"] is True
+    assert sorted(p.name for p in disk.iterdir()) == ["episode.json", "filler"]  # no temp file left
+    (disk / "filler").unlink()
+    path.unlink()
+    _fill(disk)
+    with pytest.raises(OutputError, match="disk is full"):
+        write_record(_record(n_events=20_000), disk)
+    assert not path.exists()  # never a 0-byte or cut-off record
+
+
+def test_row24_atomic_write_failure_midway_leaves_old_file(tmp_path, monkeypatch):
+    """Same as the full-disk test without a mount: the write fails after the bytes went out."""
+    import errno
+    import os
+
+    import tcot_hybrid.jsonio as jsonio
+    from tcot_hybrid.episode import write_record
+    from tcot_hybrid.errors import OutputError
+
+    path = write_record(_record(), tmp_path)
+    before = path.read_bytes()
+
+    def no_space(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(jsonio.os, "fsync", no_space)
+    with pytest.raises(OutputError, match="disk is full"):
+        write_record(_record(n_events=50), tmp_path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["episode.json"]
+
+
+def test_row24_symlinked_record_is_replaced_never_followed(tmp_path):
+    from tcot_hybrid.episode import write_record
+
+    precious = tmp_path / "precious.txt"
+    precious.write_text("do not overwrite")
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "episode.json").symlink_to(precious)
+    path = write_record(_record(), out)
+    assert precious.read_text() == "do not overwrite"
+    assert not path.is_symlink() and json.loads(path.read_text())["task"] == "t"
+
+
+def _cli(argv: list[str], monkeypatch=None) -> tuple[int, str]:
+    """Run ``tcot`` in-process; returns (exit code, stderr)."""
+    import contextlib
+    import io
+
+    from tcot_hybrid.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            rc = main(argv)
+        except SystemExit as exc:  # tyro/argparse usage errors
+            rc = int(exc.code or 0)
+    return rc, err.getvalue()
+
+
+@pytest.fixture()
+def no_episode(monkeypatch):
+    """Fail the test if an episode is built (the output checks must come first)."""
+    import tcot_hybrid.episode as episode
+
+    def boom(*a, **k):
+        raise AssertionError("an episode was built before the output location was checked")
+
+    monkeypatch.setattr(episode.EpisodeRunner, "__init__", boom)
+
+
+def test_row24_unusable_out_refused_before_the_episode(tmp_path, no_episode):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(afile)])
+    assert rc == 2 and "is an existing file, not a folder" in err
+    assert afile.read_text() == ""
+    out = tmp_path / "run"
+    (out / "episode.json").mkdir(parents=True)
+    rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(out)])
+    assert rc == 2 and "directory named episode.json" in err
+    vdir = tmp_path / "v"
+    vdir.mkdir()
+    rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(tmp_path / "ok"), "--video", str(vdir)])
+    assert rc == 2 and "--video" in err and "is a directory" in err
+    rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(tmp_path / "ok"), "--video",
+                    str(afile / "x.mp4")])
+    assert rc == 2 and "--video folder" in err
+
+
+def test_row24_read_only_and_full_outputs_refused_before_work(mount_tmpfs, no_episode, tmp_path):
+    ro = mount_tmpfs("ro", ro=True)
+    full = mount_tmpfs("full", size="128k")
+    _fill(full)
+    for where, why in ((ro, "read-only"), (full, "disk is full")):
+        rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(where / "run")])
+        assert rc == 2 and why in err, err
+        rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--out", str(tmp_path / "ok"),
+                        "--video", str(where / "v.mp4")])
+        assert rc == 2 and "--video" in err and why in err, err
+        rc, err = _cli(["eval", "--tasks", "goal_cube_on_plate", "--episodes", "1", "--out", str(where / "ev")])
+        assert rc == 2 and why in err, err
+        rc, err = _cli(["collect", "--tasks", "goal_cube_on_plate", "--episodes-per-task", "1", "--quiet",
+                        "--out", str(where / "d.hdf5")])
+        assert rc == 2 and why in err, err
+        rc, err = _cli(["train", "--data", str(tmp_path / "none.hdf5"), "--out", str(where / "p.safetensors")])
+        assert rc == 2 and why in err, err
+
+
+def test_train_refuses_to_overwrite_a_checkpoint_without_flag(tmp_path):
+    from tcot_hybrid.errors import OutputError
+    from tcot_hybrid.learning.train import check_train_out
+
+    ck = tmp_path / "planner.safetensors"
+    ck.write_bytes(b"trained")
+    ck.with_suffix(".json").write_text("{}")
+    rc, err = _cli(["train", "--data", str(tmp_path / "none.hdf5"), "--out", str(ck)])
+    assert rc == 2 and "--overwrite" in err and ck.read_bytes() == b"trained"
+    with pytest.raises(OutputError):
+        check_train_out(ck, overwrite=False)
+    check_train_out(ck, overwrite=True)  # allowed with the flag
+    check_train_out(tmp_path / "new.safetensors", overwrite=False)
+    rc, err = _cli(["train", "--data", str(tmp_path / "none.hdf5"), "--out", str(ck), "--overwrite"])
+    assert rc == 2 and "none.hdf5" in err  # got past the overwrite check to the missing data
+
+
+def test_collect_stops_cleanly_on_a_full_disk_keeping_its_demos(mount_tmpfs, tmp_path):
+    from tcot_hybrid.data.collect import MIN_FREE_BYTES
+    from tcot_hybrid.data.dataset import open_demos
+
+    disk = mount_tmpfs("disk", size=f"{(MIN_FREE_BYTES + 6 * 2**20) // 1024}k")
+    out = disk / "demos.hdf5"
+    r = subprocess.run([sys.executable, "-m", "tcot_hybrid.cli", "collect", "--tasks", "goal_cube_on_plate",
+                        "--episodes-per-task", "30", "--workers", "1", "--quiet", "--out", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "Traceback" not in r.stderr and len(r.stderr) < ERROR_CHARS
+    assert "(nearly) full" in r.stderr and "re-run the same command to resume" in r.stderr
+    with open_demos(out) as f:
+        kept = len(f.demos)
+    assert 0 < kept < 30
+    print(f"\ncollect on a {disk} of {MIN_FREE_BYTES // 2**20 + 6} MiB: stopped after {kept} demos: "
+          f"{r.stderr.strip()[:200]}")
+
+
+def test_collect_write_error_is_a_dataset_error(tmp_path, monkeypatch):
+    """An HDF5 write that fails anyway (the free-space check passed) stops with DatasetError, no more writes."""
+    import errno
+
+    import tcot_hybrid.data.collect as collect_mod
+    from tcot_hybrid.errors import DatasetError
+    from tcot_hybrid.run_config import RunConfig
+
+    def failing(h5, rec, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(collect_mod, "write_demo", failing)
+    with pytest.raises(DatasetError, match="writing a demo to .* failed.*resume"):
+        collect_mod.collect(RunConfig(), tasks=["goal_cube_on_plate"], seeds=[0], out=tmp_path / "d.hdf5",
+                            workers=1, progress=False)
+
+
+def test_huge_video_and_planner_image_sizes_refused():
+    from tcot_hybrid.scene import SceneConfig
+
+    for kw in ({"video_width": 100_000}, {"video_height": 100_000}, {"planner_image_px": 100_000}):
+        with pytest.raises(ConfigError, match=f"{next(iter(kw))} = 100000 px is above"):
+            SceneConfig(**kw)
+    rc, err = _cli(["run", "--task", "goal_cube_on_plate", "--scene.video-width", "100000", "--video", "/tmp/x.mp4"])
+    assert rc == 2 and "Traceback" not in err
+
+
+def test_nan_joint_data_caught_when_the_dataset_is_read(tmp_path):
+    import h5py
+
+    from tcot_hybrid.data.collect import collect
+    from tcot_hybrid.data.dataset import open_demos
+    from tcot_hybrid.errors import DatasetError
+    from tcot_hybrid.run_config import RunConfig
+
+    out = tmp_path / "d.hdf5"
+    collect(RunConfig(), tasks=["goal_cube_on_plate"], seeds=[0], out=out, workers=1, progress=False)
+    with h5py.File(out, "a") as h5:
+        q = h5["data/demo_0/obs/robot0_joint_pos"]
+        arr = q[()]
+        arr[3, 2] = np.nan
+        q[...] = arr
+    with open_demos(out) as f, pytest.raises(DatasetError, match=r"demo_0/obs/robot0_joint_pos holds a non-finite value \(nan at sample 3\)"):
+        f.read("demo_0")
+    from tcot_hybrid.data.labels import TrajectoryWindowConfig
+    from tcot_hybrid.learning.data import load_frames
+    from tcot_hybrid.learning.vocab import Vocabulary
+
+    with pytest.raises(DatasetError, match="non-finite"):
+        load_frames(out, "all", Vocabulary.build(["put the cube on the plate"]), windows=TrajectoryWindowConfig(),
+                    max_tokens=24, direct_horizon=4)
+
+
+# --- smaller items -----------------------------------------------------------------------------------------
+
+def test_one_line_summary_names_the_fault():
+    from tcot_hybrid.cli import outcome
+
+    assert outcome({"success": True, "fault": None}) == "SUCCESS"
+    assert outcome({"success": False, "fault": None}) == "failure"
+    assert outcome({"success": False, "fault": "sim_fault:mjWARN_BADQACC"}) == "FAULT sim_fault:mjWARN_BADQACC"
+
+
+def test_sim_time_keeps_counting_after_mujoco_resets_a_diverged_state():
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0))
+    s = r.stack
+    r.settle()
+    for _ in range(30):
+        s.executor.tick()
+    t_before = s.sim.time_s
+    hand = s.sim.model.site_bodyid[s.sim.ee_site]
+    s.sim.data.xfrc_applied[hand, :3] = [1e9, 0, 0]  # issue 18: a 1e9 N push
+    for _ in range(5):
+        s.executor.tick()
+    assert s.sim.fault is not None
+    ticks = 5 * r.cfg.timing.substeps * r.cfg.timing.sim_dt
+    assert s.sim.data.time < t_before  # MuJoCo restarted its clock
+    assert s.sim.time_s == pytest.approx(t_before + ticks, abs=1e-9)
+    assert r.record(0.0)["sim_time_s"] == pytest.approx(t_before + ticks, abs=1e-4)

@@ -119,11 +119,11 @@ def save_checkpoint(path: str | Path, model, meta: dict) -> Path:
     missing = [k for k in REQUIRED_META if k not in full]
     if missing:
         raise CheckpointError(f"checkpoint metadata lacks {missing}")
+    from tcot_hybrid.jsonio import atomic_write_bytes, atomic_write_text
+
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_suffix(".tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(p)
-    meta_path(p).write_text(json.dumps(full, indent=1, default=_json_default) + "\n")
+    atomic_write_bytes(p, blob)  # each file is replaced whole; weights and metadata are tied by weights_sha256
+    atomic_write_text(meta_path(p), json.dumps(full, indent=1, default=_json_default) + "\n")
     return p
 
 
