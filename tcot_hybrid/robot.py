@@ -101,12 +101,27 @@ class RobotSpec:
 
     def __post_init__(self) -> None:
         _validate_fields(self)
+        check_physical_bounds(self)
         _validate_against_mjcf(self, _compile(self.name, self.mjcf_path))
 
     @property
     def dof(self) -> int:
         """Number of arm joints."""
         return len(self.arm_joints)
+
+
+SPEC_BOUNDS: dict[str, tuple[float, float, str]] = {
+    "q_min": (-4 * math.pi, 4 * math.pi, "rad"),
+    "q_max": (-4 * math.pi, 4 * math.pi, "rad"),
+    "v_max": (0.01, 10.0, "rad/s"),
+    "a_max": (0.1, 1000.0, "rad/s^2"),
+    "j_max": (1.0, 1e5, "rad/s^3"),
+    "tau_max": (0.1, 2000.0, "N m"),
+    "kp": (1e-3, 1e5, "1/s^2"),
+    "kd": (1e-3, 1e3, "1/s"),
+}
+"""Per-joint ranges a spec value must lie in (docs/robot_spec.md, "Sanity bounds"). No real arm is
+outside them; a value beyond (v_max 1e12, tau_max 1e9) would silently switch a safety check off."""
 
 
 def _err(robot: str, fld: str, msg: str) -> RobotModelError:
@@ -192,6 +207,18 @@ def _validate_fields(spec: RobotSpec) -> None:
         i = int(bad[0])
         raise _err(r, "home_q", f"joint {spec.arm_joints[i]!r} home {float(spec.home_q[i])} rad is outside "
                                 f"[q_min, q_max] = [{float(spec.q_min[i])}, {float(spec.q_max[i])}]")
+
+
+def check_physical_bounds(spec: RobotSpec) -> None:
+    """Refuse limits and gains outside SPEC_BOUNDS (values no real arm has), naming joint, value, bound."""
+    for fld, (lo, hi, unit) in SPEC_BOUNDS.items():
+        arr = getattr(spec, fld)
+        bad = np.flatnonzero((arr < lo) | (arr > hi))
+        if bad.size:
+            i = int(bad[0])
+            raise _err(spec.name, fld, f"joint {spec.arm_joints[i]!r} has {float(arr[i]):g} {unit}, outside the "
+                                       f"sanity range [{lo:g}, {hi:g}] {unit} (no real arm has it; "
+                                       f"docs/robot_spec.md, 'Sanity bounds')")
 
 
 def _compile(robot: str, path: Path) -> mujoco.MjModel:

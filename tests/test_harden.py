@@ -59,7 +59,7 @@ def bomb_files(tmp: Path) -> dict[str, Path]:
 def _measure_load(path: Path) -> dict:
     """Load ``path`` in a fresh interpreter; its own peak RSS, load time, error text."""
     code = textwrap.dedent(f"""
-        import json, resource, sys, time
+        import json, sys, time
         from tcot_hybrid.run_config import load_config_file
         from tcot_hybrid.errors import TcotError
         t0 = time.perf_counter()
@@ -71,7 +71,9 @@ def _measure_load(path: Path) -> dict:
         except BaseException as exc:
             err, kind = repr(exc)[:500], "CRASH:" + type(exc).__name__
         dt = time.perf_counter() - t0
-        print(json.dumps({{"s": dt, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        # VmHWM, not ru_maxrss: ru_maxrss keeps the forking parent's (pytest's) peak across exec
+        hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))
+        print(json.dumps({{"s": dt, "rss_mb": hwm / 1024,
                           "error": err[:100000], "error_len": len(err), "kind": kind}}))
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -596,3 +598,56 @@ def test_sim_time_keeps_counting_after_mujoco_resets_a_diverged_state():
     assert s.sim.data.time < t_before  # MuJoCo restarted its clock
     assert s.sim.time_s == pytest.approx(t_before + ticks, abs=1e-9)
     assert r.record(0.0)["sim_time_s"] == pytest.approx(t_before + ticks, abs=1e-4)
+
+
+# --- row 26: physically absurd robot specs -----------------------------------------------------------------
+
+def _edited_robot(tmp: Path, name: str, *, toml_edit=None, xml_edit=None) -> Path:
+    folder = _robot_copy(tmp, "panda", name).parent
+    if toml_edit:
+        t = folder / "robot.toml"
+        t.write_text(toml_edit(t.read_text()))
+    if xml_edit:
+        x = folder / "panda.xml"
+        x.write_text(xml_edit(x.read_text()))
+    return folder / "robot.toml"
+
+
+@pytest.mark.parametrize("field, line, value", [
+    ("v_max", "v_max = [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]", "1e12"),
+    ("a_max", "a_max = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0]", "1e9"),
+    ("j_max", "j_max = [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0]", "1e15"),
+    ("v_max", "v_max = [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]", "1e-9"),
+    ("kp", "kp = [400.0, 400.0, 400.0, 400.0, 400.0, 400.0, 400.0]", "1e12"),
+    ("q_max", "q_max = [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]", "1e6"),
+])
+def test_row26_absurd_spec_values_refused_with_the_bound(tmp_path, field, line, value):
+    from tcot_hybrid.errors import RobotModelError
+    from tcot_hybrid.robot import SPEC_BOUNDS, load_robot_spec
+
+    def edit(text):
+        assert line in text
+        n = line.count(",") + 1
+        return text.replace(line, f"{field} = [{', '.join([value] * n)}]")
+
+    toml = _edited_robot(tmp_path, "absurd", toml_edit=edit)
+    lo, hi, unit = SPEC_BOUNDS[field]
+    with pytest.raises(RobotModelError) as exc:
+        load_robot_spec(toml)
+    assert field in str(exc.value) and f"[{lo:g}, {hi:g}] {unit}" in str(exc.value)
+
+
+def test_row26_tau_max_beyond_any_arm_refused_even_with_a_matching_mjcf(tmp_path):
+    """tau_max 1e9 with the MJCF motors' ctrlrange raised to match: torque saturation would be off."""
+    import re
+
+    from tcot_hybrid.errors import RobotModelError
+    from tcot_hybrid.robot import load_robot_spec
+
+    toml = _edited_robot(
+        tmp_path, "strong",
+        toml_edit=lambda t: t.replace("tau_max = [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]",
+                                      "tau_max = [1e9, 1e9, 1e9, 1e9, 1e9, 1e9, 1e9]"),
+        xml_edit=lambda x: re.sub(r'(<motor[^>]*ctrlrange=")[^"]*(")', r"\g<1>-1e9 1e9\g<2>", x))
+    with pytest.raises(RobotModelError, match=r"tau_max: joint 'joint1' has 1e\+09 N m, outside the sanity range"):
+        load_robot_spec(toml)
