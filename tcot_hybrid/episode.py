@@ -100,6 +100,17 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)
 
 
+def reach_warnings(stack: Stack) -> list[dict]:
+    """Grasp/release points of the episode's layout its robot cannot reach (``robot_check``); a check that
+    cannot run (a task without a script) warns about nothing rather than stopping the run."""
+    from tcot_hybrid.robot_check import unreachable_targets
+
+    try:
+        return unreachable_targets(stack.robot, stack.task, stack.sim.world)
+    except Exception:  # noqa: BLE001 - advisory only
+        return []
+
+
 class EpisodeRunner:
     """Runs one episode step by step (the CLI, the evaluator, the bench and the examples share it).
 
@@ -120,6 +131,17 @@ class EpisodeRunner:
         self.plans: list = []
         self._obs: tuple[int, Observation] | None = None
         self.success_time_s: float | None = None
+        self.reach_warnings = reach_warnings(self.stack)  # before any step: printed by `tcot run`, recorded
+
+    def warning_lines(self) -> list[str]:
+        """One line per grasp/release point of this layout the robot cannot reach top-down."""
+        from tcot_hybrid.robot import robot_ref
+
+        r = self.stack.robot
+        where = robot_ref(r)
+        return [f"robot {r.name!r} cannot reach the {w['target']} point {w['pos']} m of {self.cfg.task!r} top-down "
+                f"(IK misses it by {w['pos_err_m'] * 100:.1f} cm): the episode will likely fail; `tcot robot check "
+                f"{where}` maps its reach" for w in self.reach_warnings]
 
     def observe(self, step: int) -> Observation:
         """The planner's observation at this step (rendered at most once per step)."""
@@ -201,6 +223,8 @@ class EpisodeRunner:
         s, cfg = self.stack, self.cfg
         t0 = time.perf_counter()
         max_steps = int(round(s.task.time_limit_s / cfg.timing.plan_dt))
+        for w in self.reach_warnings:
+            s.executor.event("unreachable_target", **w)
         self.settle()
         step = 0
         try:

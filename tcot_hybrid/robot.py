@@ -555,6 +555,14 @@ def _check_against_mujoco(robot: PinocchioRobot, m: mujoco.MjModel, idx: RobotIn
 
 # --- identity and sanity checks (bring-your-own arm) ---------------------------------------------------
 
+def robot_ref(spec: RobotSpec) -> str:
+    """How to name this robot on the command line: its name if bundled, else the folder of its robot.toml
+    (a name would not find it)."""
+    folder = spec.mjcf_path.parent
+    bundled = folder.parent.resolve() == _robots_dir().resolve() and folder.name == spec.name
+    return spec.name if bundled else str(folder)
+
+
 def robot_model_digest(spec: RobotSpec) -> str:
     """Hash of what a planner checkpoint depends on: the compiled robot model's kinematics and dynamics
     (bodies, joints, sites, actuators; floats rounded to 1e-9) and the spec's arm joints and TCP site.

@@ -40,8 +40,12 @@ class RunConfig:
     """
 
     task: str = "goal_cube_on_plate"
+    """Task name (`tcot list`)."""
     seed: int = 0
+    """Episode seed; the same seed and config replay bit-identically."""
     robot: str = "panda"
+    """A bundled robot name (`tcot list`) or the path of your own robot's robot.toml (or its folder).
+    Check your own with `tcot robot check PATH` (docs/robot_spec.md)."""
     controller: str = "computed_torque"
     ik: str = "mink"
     planner: str = "oracle"

@@ -651,3 +651,120 @@ def test_row26_tau_max_beyond_any_arm_refused_even_with_a_matching_mjcf(tmp_path
         xml_edit=lambda x: re.sub(r'(<motor[^>]*ctrlrange=")[^"]*(")', r"\g<1>-1e9 1e9\g<2>", x))
     with pytest.raises(RobotModelError, match=r"tau_max: joint 'joint1' has 1e\+09 N m, outside the sanity range"):
         load_robot_spec(toml)
+
+
+# --- row 28: an arm that cannot reach part of the workspace --------------------------------------------------
+
+def _short_panda(tmp: Path) -> Path:
+    """The Panda mounted 30 cm further back (first joint body moved): the far half of the workspace is
+    out of reach."""
+    toml = _edited_robot(tmp, "short_panda", xml_edit=lambda x: x.replace(
+        '<body name="link1" pos="0 0 0.333">', '<body name="link1" pos="-0.3 0 0.333">'))
+    return toml.parent
+
+
+def test_row28_robot_check_bundled_panda_reaches_the_workspace(tmp_path):
+    from tcot_hybrid.robot_check import check_robot
+
+    rep = check_robot("panda", tasks=["goal_cube_on_plate", "long_stack_three_blocks"], seeds=3, step_m=0.05,
+                      png=tmp_path / "panda.png")
+    assert rep["ok"] and rep["reachable_fraction"] >= 0.95
+    assert {c["name"] for c in rep["checks"]} >= {"spec and MJCF", "Pinocchio vs MuJoCo", "gripper opening",
+                                                  "finger actuators", "reach"}
+    assert [t["task"] for t in rep["tasks"]] == ["goal_cube_on_plate", "long_stack_three_blocks"]
+    assert all(t["reachable_fraction"] == 1.0 for t in rep["tasks"])
+    assert (tmp_path / "panda.png").stat().st_size > 10_000
+
+
+def test_row28_short_reach_arm_mapped_warned_before_stepping_and_named_in_the_record(tmp_path):
+    from tcot_hybrid.robot_check import check_robot
+
+    folder = _short_panda(tmp_path)
+    rep = check_robot(folder, tasks=["object_red_cube_in_basket"], seeds=4, step_m=0.05, png=None)
+    assert rep["ok"]  # a usable robot, with a reach warning
+    assert 0.2 < rep["reachable_fraction"] < 0.8
+    reach = next(c for c in rep["checks"] if c["name"] == "reach")
+    assert not reach["ok"] and reach["severity"] == "warning"
+    assert rep["tasks"][0]["reachable_fraction"] < 1.0
+    print(f"\nrow 28: short-reach panda: reachable_fraction {rep['reachable_fraction']}, "
+          f"object_red_cube_in_basket {rep['tasks'][0]}")
+    # the run: warned before the first step, the unreachable grasp named in the record
+    out = tmp_path / "run"
+    steps: list = []
+    import tcot_hybrid.sim as sim_module
+
+    real = sim_module.Simulation.step1
+
+    def counting(self):
+        if not steps:  # what `tcot run` had printed to stderr when the first physics step came
+            steps.append(sys.stderr.getvalue())
+        real(self)
+
+    sim_module.Simulation.step1 = counting
+    try:
+        rc, _ = _cli(["run", "--robot", str(folder), "--task", "object_red_cube_in_basket", "--seed", "3",
+                      "--out", str(out)])
+    finally:
+        sim_module.Simulation.step1 = real
+    assert rc == 0
+    assert "warning: robot 'short_panda' cannot reach the grasp point" in steps[0]  # printed before stepping
+    assert f"tcot robot check {folder}" in steps[0]
+    rec = json.loads((out / "episode.json").read_text())
+    kinds = [e["kind"] for e in rec["events"]]
+    assert not rec["success"] and "unreachable_target" in kinds and "unreachable_grasp" in kinds
+    assert kinds.index("unreachable_target") < kinds.index("gripper")
+
+
+def test_robot_check_cli_json_and_exit_codes(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "tcot_hybrid.cli", "robot", "check", "ur5e", "--json", "--tasks",
+                        "goal_cube_in_bowl", "--seeds", "2", "--step", "0.1", "--png", str(tmp_path / "u.png")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-1000:]
+    rep = json.loads(r.stdout)
+    assert 0.0 <= rep["reachable_fraction"] <= 1.0 and rep["tasks"][0]["task"] == "goal_cube_in_bowl"
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "robot.toml").write_text('name = "bad"\n')
+    r = subprocess.run([sys.executable, "-m", "tcot_hybrid.cli", "robot", "check", str(bad), "--png", "none"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and "[FAIL] spec and MJCF" in r.stdout and "missing key" in r.stdout
+
+
+def test_robot_check_gripper_findings(tmp_path):
+    """Pads in a child body of the finger, a second finger actuator, a short opening: each named."""
+    from tcot_hybrid.robot import load_robot_spec
+    from tcot_hybrid.robot_check import gripper_checks
+
+    spec = load_robot_spec("panda")
+    xml = spec.mjcf_path.read_text()
+    assert 'range="0 0.04"' in xml
+    short = _edited_robot(tmp_path, "narrow", xml_edit=lambda x: x.replace('range="0 0.04"', 'range="0 0.015"')
+                          .replace('ctrlrange="0 0.04"', 'ctrlrange="0 0.015"'),
+                          toml_edit=lambda t: t.replace("gripper_open = 0.04", "gripper_open = 0.015"))
+    checks = {c.name: c for c in gripper_checks(load_robot_spec(short))}
+    assert not checks["gripper opening"].ok and "3.0 cm" in checks["gripper opening"].detail
+    two = _edited_robot(tmp_path, "two", xml_edit=lambda x: x.replace(
+        "</actuator>", '  <position name="finger2_drive" joint="finger_joint2" ctrlrange="0 0.04" kp="100"/>\n'
+                       "  </actuator>"))
+    checks = {c.name: c for c in gripper_checks(load_robot_spec(two))}
+    assert not checks["finger actuators"].ok and "finger2_drive" in checks["finger actuators"].detail
+
+
+def test_compute_home_handles_continuous_joints(tmp_path):
+    """A wrist with no range (continuous) used to be clamped to 0 and the pose missed."""
+    import re
+
+    from tcot_hybrid.robot import load_robot_spec
+    from tcot_hybrid.robots.compute_home import solve_home
+
+    spec = load_robot_spec("ur5e")
+    xml = spec.mjcf_path.read_text()
+    xml2 = re.sub(r'(<joint name="wrist_3_joint"[^>]*?) range="[^"]*"', r"\1", xml)
+    assert xml2 != xml
+    mjcf = tmp_path / "ur5e.xml"
+    mjcf.write_text(xml2)
+    seed = np.array(spec.home_q) + 0.3
+    seed[-1] = 2.5  # the continuous joint starts far from 0
+    q, pe, re_ = solve_home(mjcf, list(spec.arm_joints), spec.ee_site, seed, np.array([0.45, 0.0, 0.35]))
+    assert pe < 1e-3 and re_ < 1e-2
+    assert -np.pi <= q[-1] < np.pi

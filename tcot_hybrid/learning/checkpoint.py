@@ -411,7 +411,7 @@ def checkpoints_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "checkpoints"
 
 
-def default_checkpoint(robot: str, kind: str = "trajectory") -> Path:
+def default_checkpoint(robot: str, kind: str = "trajectory", *, robot_ref: str | None = None) -> Path:
     """The shipped checkpoint for ``robot`` (``<robot>_default`` / ``<robot>_direct_default``)."""
     stem = f"{robot}_default" if kind == "trajectory" else f"{robot}_{kind}_default"
     p = checkpoints_dir() / f"{stem}{SUFFIX}"
@@ -419,7 +419,7 @@ def default_checkpoint(robot: str, kind: str = "trajectory") -> Path:
         have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}")) if checkpoints_dir().is_dir() else []
         raise CheckpointError(
             f"no shipped {kind} planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
-            f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot} --data "
+            f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot_ref or robot} --data "
             f"data/demos_{robot}.hdf5 --out runs/{robot}.safetensors{'' if kind == 'trajectory' else ' --kind ' + kind}` "
             f"and pass --checkpoint runs/{robot}.safetensors")
     return p

@@ -47,15 +47,17 @@ def check_planner_name(name: str) -> None:
 CHECKPOINT_KINDS = {"learned": "trajectory", "direct": "direct"}
 
 
-def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None) -> Path | None:
+def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None, *,
+                       robot_ref: str | None = None) -> Path | None:
     """The checkpoint file planner ``name`` loads: ``checkpoint`` if given, else the robot's shipped default
-    (``CheckpointError`` naming the shipped ones if there is none); None for planners without a network."""
+    (``CheckpointError`` naming the shipped ones if there is none); None for planners without a network.
+    ``robot_ref`` is how the user names the robot (a path for one of their own), for the error's advice."""
     kind = CHECKPOINT_KINDS.get(name)
     if kind is None:
         return None
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 
-    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind)
+    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind, robot_ref=robot_ref)
 
 
 def make_planner(name: str, ctx: PlannerContext) -> Planner:
