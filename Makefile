@@ -20,7 +20,7 @@ demo: setup
 	$(BIN)/tcot run --task goal_cube_on_plate --seed 0 --video runs/demo/demo.mp4 --out runs/demo
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest
 
 # The shipped planner, from nothing (docs/planner.md, "Training pipeline"): demonstrations, stage 1,
 # online rollouts and oracle recoveries under perturbations, stage 2 (trajectories + failure detection).

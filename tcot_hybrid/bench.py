@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 
 from tcot_hybrid.errors import TcotError
+from tcot_hybrid.markdown import bench_markdown
 from tcot_hybrid.run_config import RunConfig
 
 BENCH_TASK = "goal_cube_on_plate"
@@ -291,46 +292,5 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(result, indent=2))
-    (out / "bench.md").write_text(markdown(result))
+    (out / "bench.md").write_text(bench_markdown(result))
     return result
-
-
-def markdown(result: dict) -> str:
-    lines = [f"Measured by `{result['command']}` (robot {result['robot']}, task {result['task']}, "
-             f"sim_dt {result['timing']['sim_dt']} s, ctrl_dt {result['timing']['ctrl_dt']} s, "
-             f"plan_dt {result['timing']['plan_dt']} s, {result['machine']['cpus']} CPUs).", "",
-             "| figure | median | min | max | unit |", "|---|---|---|---|---|"]
-    for name, f in result["figures"].items():
-        lines.append(f"| {name} | {f['median']:.4g} | {f['min']:.4g} | {f['max']:.4g} | {f['unit']} |")
-    lines += ["", "| ratio | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.4g} |" for k, v in result["ratios"].items()]
-    lines += [f"\nNote: {n}" for n in result.get("notes", [])]
-    return "\n".join(lines) + "\n"
-
-
-def _section_markers(marker: str) -> tuple[str, str]:
-    return f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
-
-
-def has_readme_section(readme: str | Path, marker: str) -> bool:
-    """Whether the Markdown file exists and has a <!-- {marker}:start/end --> section."""
-    p = Path(readme)
-    if not p.is_file():
-        return False
-    s = p.read_text()
-    return all(m in s for m in _section_markers(marker))
-
-
-def update_readme_section(readme: str | Path, marker: str, text: str, *, inside: str | None = None) -> None:
-    """Replace the text between <!-- {marker}:start --> and <!-- {marker}:end --> in the README. With
-    ``inside``, a missing section is first created just before <!-- {inside}:end -->."""
-    p = Path(readme)
-    s = p.read_text()
-    start, end = _section_markers(marker)
-    if (start not in s or end not in s) and inside is not None and f"<!-- {inside}:end -->" in s:
-        s = s.replace(f"<!-- {inside}:end -->", f"{start}\n{end}\n<!-- {inside}:end -->", 1)
-    if start not in s or end not in s:
-        raise ValueError(f"{p} has no {start} … {end} section")
-    head, rest = s.split(start, 1)
-    _, tail = rest.split(end, 1)
-    p.write_text(f"{head}{start}\n{text.rstrip()}\n{end}{tail}")

@@ -290,7 +290,7 @@ def cmd_eval(argv: list[str]) -> int:
             validate_names(j.cfg)
     result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
     if cmd.readme:
-        from tcot_hybrid.bench import update_readme_section
+        from tcot_hybrid.markdown import update_readme_section
         from tcot_hybrid.evaluation import markdown
 
         summary = (f"Measured by `tcot eval {' '.join(argv)}` ({result['episodes']} episodes; all cells in "
@@ -305,7 +305,8 @@ def cmd_eval(argv: list[str]) -> int:
 # --- tcot bench ---------------------------------------------------------------------------------------
 
 def cmd_bench(argv: list[str]) -> int:
-    from tcot_hybrid.bench import markdown, run_bench, update_readme_section
+    from tcot_hybrid.bench import run_bench
+    from tcot_hybrid.markdown import bench_markdown, update_readme_section
 
     p = argparse.ArgumentParser(prog="tcot bench", description="speed and memory figures (medians with spread, "
                                 "ratios measured in the same run); writes DIR/bench.json and DIR/bench.md")
@@ -321,7 +322,7 @@ def cmd_bench(argv: list[str]) -> int:
     command = "tcot bench " + " ".join(argv)
     result = run_bench(args.out, quick=args.quick, robot=args.robot, command=command.strip())
     if args.readme:
-        update_readme_section(args.readme, "bench", markdown(result))
+        update_readme_section(args.readme, "bench", bench_markdown(result))
     for k, v in result["ratios"].items():
         print(f"{k}: {v}")
     print(f"-> {args.out / 'bench.json'}")
@@ -388,7 +389,7 @@ COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_ben
 COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromlist=["_"]).cmd_collect(argv)
 COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
 COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist=["_"]).cmd_replay(argv)
-COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
+COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train_cli", fromlist=["_"]).cmd_train(argv)
 
 
 MAX_ERROR_CHARS = 2000

@@ -56,7 +56,8 @@ class Simulation:
         self.gripper_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.gripper_joints])
         finger_bodies = [m.jnt_bodyid[m.joint(j).id] for j in robot.gripper_joints]
         finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] == b) for b in finger_bodies)
-        self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms)
+        self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms,
+                           gripper=((self.gripper_act, robot.gripper_open, robot.gripper_closed),))
         self.ee_site = m.site(robot.ee_site).id
         self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}

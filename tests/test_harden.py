@@ -482,7 +482,7 @@ def test_row24_read_only_and_full_outputs_refused_before_work(mount_tmpfs, no_ep
 
 def test_train_refuses_to_overwrite_a_checkpoint_without_flag(tmp_path):
     from tcot_hybrid.errors import OutputError
-    from tcot_hybrid.learning.train import check_train_out
+    from tcot_hybrid.learning.train_cli import check_train_out
 
     ck = tmp_path / "planner.safetensors"
     ck.write_bytes(b"trained")
