@@ -33,7 +33,6 @@ from tcot_hybrid.supervision import Supervisor
 from tcot_hybrid.tasks import Task, make_task
 from tcot_hybrid.jsonio import json_default as _json_default
 
-SETTLE_S = 0.2  # [s] objects settle (robot holding home) before the first planner step
 
 
 def file_digest(path: str | Path) -> str:
@@ -60,7 +59,13 @@ def validate_names(cfg: RunConfig) -> None:
     from tcot_hybrid.errors import ControllerError, unknown_name
     from tcot_hybrid.ik.base import check_ik_options, ik_backend, joint_bounds
 
-    make_task(cfg.task)
+    task = make_task(cfg.task)
+    task.set_episode(seed=cfg.seed, init=cfg.init)  # e.g. --init shipped on a workcell task
+    if cfg.scene.planner_camera not in task.cameras():
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(f"scene.planner_camera = {cfg.scene.planner_camera!r} is not a camera of task "
+                          f"{cfg.task!r}'s scene; choose one of {', '.join(task.cameras())}")
     robot = load_robot_spec(cfg.robot)
     if cfg.controller not in list_controllers():
         raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
@@ -81,11 +86,12 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     validate_names(cfg)
     robot = load_robot_spec(cfg.robot)
     task = make_task(cfg.task)
+    task.set_episode(seed=cfg.seed, init=cfg.init)
     sim = Simulation(robot, task, timing=cfg.timing, scene=cfg.scene)
     sim.reset(np.random.default_rng(cfg.seed))
     px = cfg.scene.planner_image_px
     camera = CameraModel.from_mujoco(sim.model, sim.data, cfg.scene.planner_camera, width=px, height=px)
-    dyn = MujocoArmDynamics(sim.model, sim.data, robot)
+    dyn = MujocoArmDynamics(sim.model, sim.data, robot, T_base_world=sim.T_base_world)
     smoother = JointSmoother.from_spec(robot, ctrl_dt=cfg.timing.ctrl_dt, config=cfg.smoothing)
     smoother.reset(sim.q)
     controller = make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt,
@@ -106,7 +112,7 @@ def reach_warnings(stack: Stack) -> list[dict]:
     from tcot_hybrid.robot_check import unreachable_targets
 
     try:
-        return unreachable_targets(stack.robot, stack.task, stack.sim.world)
+        return unreachable_targets(stack.robot, stack.task, stack.sim.world, stack.sim.T_base_world)
     except Exception:  # noqa: BLE001 - advisory only
         return []
 
@@ -161,7 +167,7 @@ class EpisodeRunner:
 
     def settle(self) -> None:
         ex = self.stack.executor
-        for _ in range(round(SETTLE_S / self.cfg.timing.ctrl_dt)):
+        for _ in range(round(self.stack.task.settle_s / self.cfg.timing.ctrl_dt)):
             ex.tick()
 
     def _reset_scene(self) -> None:

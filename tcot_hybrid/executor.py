@@ -96,7 +96,7 @@ class ExecutorConfig:
 
 def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
                     min_horizontal_m: float | None, min_vertical_m: float,
-                    switch_min_horizontal_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    switch_min_horizontal_m: float | None = None, return_source: bool = False):
     """Waypoints with every diagonal segment split into a sideways and a vertical move, the sideways one at the
     higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
     that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
@@ -104,12 +104,13 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     than ``min_vertical_m`` up or down; None thresholds are off. ``start`` and ``start_closed``
     are the TCP and the gripper command now (the first segment's start). A corner keeps the gripper bit of its
     segment's start, so grasps and releases still happen at the planned points. Pure function; returns new
-    arrays."""
-    out_p, out_g = [], []
+    arrays, and with ``return_source`` also each output point's plan index (a corner's is its segment's end:
+    it takes that waypoint's orientation)."""
+    out_p, out_g, out_src = [], [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
     prev_is_switch = False
-    for p, g in zip(points, grip):
+    for i, (p, g) in enumerate(zip(points, grip)):
         is_switch = bool(g) != prev_g
         near_switch = is_switch or prev_is_switch
         thresholds = [t for t in (min_horizontal_m, switch_min_horizontal_m if near_switch else None) if t is not None]
@@ -120,9 +121,13 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
             corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
             out_p.append(corner)
             out_g.append(prev_g)
+            out_src.append(i)
         out_p.append(p)
         out_g.append(bool(g))
+        out_src.append(i)
         prev, prev_g, prev_is_switch = p, bool(g), is_switch
+    if return_source:
+        return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_src, int)
     return np.asarray(out_p), np.asarray(out_g, bool)
 
 
@@ -139,7 +144,8 @@ class MotionExecutor:
         self.events: list[dict] = []
         self.plan: WaypointPlan | None = None
         self.latest_points: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # last lifted plan per kind (videos)
-        self.points: np.ndarray = np.zeros((0, 3))
+        self.points: np.ndarray = np.zeros((0, 3))  # waypoints [m, world]
+        self.rots: np.ndarray = np.zeros((0, 3, 3))  # TCP orientation per waypoint [world]
         self.grip: np.ndarray = np.zeros(0, bool)
         self.index = -1
         self.phase = "idle"  # idle | move | settle | done
@@ -169,13 +175,15 @@ class MotionExecutor:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False
         grip = np.asarray(plan.gripper_closed, bool)
+        rots = np.broadcast_to(R_DOWN, (len(plan), 3, 3)) if plan.tcp_rot is None else plan.tcp_rot
         cfg = self.config
         if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
-            points, grip = square_transits(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                           min_horizontal_m=cfg.transit_min_horizontal_m,
-                                           min_vertical_m=cfg.transit_min_vertical_m,
-                                           switch_min_horizontal_m=cfg.switch_min_horizontal_m)
-        self.plan, self.points, self.grip = plan, points, grip
+            points, grip, source = square_transits(
+                self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
+                min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
+                switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
+            rots = rots[source]
+        self.plan, self.points, self.grip, self.rots = plan, points, grip, np.asarray(rots)
         self.latest_points[plan.kind] = (points, self.grip)
         q = self.sim.q
         ref_q = self.smoother.reference.q
@@ -203,7 +211,9 @@ class MotionExecutor:
         self.index, self.phase = i, "move"
         if not keep:
             self._arrived_at = self._waiting_at = None
-        target = IKTarget(pos=self.points[i], rot=R_DOWN)
+        # Plans live in the world frame; IK solves in the robot's own base frame (identity in the workcell).
+        T = self.sim.T_base_world
+        target = IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=T[:3, :3] @ self.rots[i])
         try:
             res = self.ik.solve(target, self._ik_seed)
         except TcotError as exc:  # bad input: keep holding, report
@@ -262,6 +272,7 @@ class MotionExecutor:
     def reset_after_scene_reset(self) -> None:
         """The simulator was reset (arm at home): drop the plan and restart the reference there."""
         self.plan, self.points, self.grip = None, np.zeros((0, 3)), np.zeros(0, bool)
+        self.rots = np.zeros((0, 3, 3))
         self.index, self.phase = -1, "idle"
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q

@@ -157,14 +157,14 @@ class ObjectDrop(Perturbation):
         sim = runner.stack.sim
         world = sim.world
         held = [n for n in world.objects if world.is_grasped(n)]
-        if not held or sim.tcp_pos()[2] < 0.08:
+        if not held or sim.tcp_pos()[2] - sim.support_z < 0.08:  # low over the support: a drop is a place
             return None
-        closed_cmd = sim.data.ctrl[sim.gripper_act]
-        sim.data.ctrl[sim.gripper_act] = sim.robot.gripper_open
+        closed_cmd = sim.gripper_closed_cmd()
+        sim.set_gripper(False)
         steps_open = max(1, int(round(self.strength / runner.cfg.timing.plan_dt)))
 
         def restore():
-            sim.data.ctrl[sim.gripper_act] = closed_cmd
+            sim.set_gripper(closed_cmd)
         self.pending.append((step + steps_open, restore))
         return {"object": held[0], "tcp_z_m": round(float(sim.tcp_pos()[2]), 3)}
 

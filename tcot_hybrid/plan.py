@@ -12,6 +12,7 @@ import numpy as np
 from tcot_hybrid.errors import PlanningError
 
 PLAN_KINDS = ("global", "local", "direct")
+ROT_TOL = 1e-6  # max |R^T R - I| entry of a waypoint orientation
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -24,6 +25,10 @@ class WaypointPlan:
     camera:         name of the planner camera the pixels live in
     kind:           "global" (whole task), "local" (short horizon) or "direct" (one-step action)
     step:           planner step at which the plan was made
+    tcp_rot:        optional (N, 3, 3) TCP orientation per waypoint in the world frame (columns: the TCP's
+                    x, y = finger closing axis, z = approach axis). None = top-down with the fingers closing
+                    along world y (``robot.R_DOWN``), all the workcell's skills need. LIBERO's skills grasp
+                    tilted and turned (rims, handles, knobs), so its oracle gives one per waypoint.
     """
 
     uv_px: np.ndarray
@@ -32,6 +37,7 @@ class WaypointPlan:
     camera: str
     kind: str
     step: int = 0
+    tcp_rot: np.ndarray | None = None
     meta: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -62,6 +68,22 @@ class WaypointPlan:
                 f"waypoint {i} is not finite: uv_px={uv[i].tolist()}, depth_m={depth[i]} "
                 f"({bad.size} of {n} waypoints bad)"
             )
+        if self.tcp_rot is not None:
+            try:
+                rot = np.asarray(self.tcp_rot, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise PlanningError(f"tcp_rot must be a numeric array: {exc}") from exc
+            if rot.shape != (n, 3, 3):
+                raise PlanningError(f"tcp_rot must have shape ({n}, 3, 3) to match uv_px, got {rot.shape}")
+            ortho = np.abs(np.einsum("nji,njk->nik", rot, rot) - np.eye(3)).max(axis=(1, 2)) if n else np.zeros(0)
+            bad_rot = np.flatnonzero(~np.isfinite(ortho) | (ortho > ROT_TOL) | (np.linalg.det(rot) < 0))
+            if bad_rot.size:
+                i = int(bad_rot[0])
+                raise PlanningError(f"tcp_rot[{i}] is not a rotation matrix (|R^T R - I| = {ortho[i]:.3g}, "
+                                    f"det = {np.linalg.det(rot[i]):.3g})")
+            rot = rot.copy()
+            rot.setflags(write=False)
+            object.__setattr__(self, "tcp_rot", rot)
         if self.kind not in PLAN_KINDS:
             raise PlanningError(f"plan kind {self.kind!r} is not one of {', '.join(PLAN_KINDS)}")
         for name, arr in (("uv_px", uv), ("depth_m", depth), ("gripper_closed", grip.astype(bool))):

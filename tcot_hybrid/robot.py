@@ -35,6 +35,7 @@ _TOP_KEYS = {
     "name", "mjcf", "arm_joints", "arm_actuators", "ee_site", "gripper_joints", "gripper_actuator",
     "gripper_open", "gripper_closed", "home_q", "limits", "gains",
 }
+_OPTIONAL_TOP_KEYS = {"gripper_mirror_actuator"}
 _LIMIT_KEYS = ("q_min", "q_max", "v_max", "a_max", "j_max", "tau_max")
 _GAIN_KEYS = ("kp", "kd")
 _ARRAY_FIELDS = ("home_q",) + _LIMIT_KEYS + _GAIN_KEYS
@@ -68,6 +69,9 @@ class RobotSpec:
     gripper_actuator: position actuator driving the fingers.
     gripper_open:     gripper actuator ctrl for open (unit of the actuator, [m] for both bundled).
     gripper_closed:   gripper actuator ctrl for closed.
+    gripper_mirror_actuator: optional second finger actuator driven with the negated command (grippers with
+                      one position actuator per finger, mirrored, e.g. robosuite's PandaGripper); None if the
+                      gripper has one actuator.
     home_q:           arm joint positions at home [rad]: TCP ~ (0.45, 0, 0.35) m pointing down.
     q_min, q_max:     joint position limits [rad]; within the MJCF joint range.
     v_max:            joint speed limits [rad/s]; lower = slower, safer trajectories.
@@ -98,6 +102,7 @@ class RobotSpec:
     tau_max: np.ndarray
     kp: np.ndarray
     kd: np.ndarray
+    gripper_mirror_actuator: str | None = None
 
     def __post_init__(self) -> None:
         _validate_fields(self)
@@ -185,6 +190,11 @@ def _validate_fields(spec: RobotSpec) -> None:
     overlap = set(spec.arm_joints) & set(spec.gripper_joints)
     if overlap:
         raise _err(r, "gripper_joints", f"shares joints with arm_joints: {sorted(overlap)}")
+    if spec.gripper_mirror_actuator is not None and (
+            not isinstance(spec.gripper_mirror_actuator, str) or not spec.gripper_mirror_actuator
+            or spec.gripper_mirror_actuator == spec.gripper_actuator):
+        raise _err(r, "gripper_mirror_actuator", f"must be a second actuator's name (not gripper_actuator) or absent, "
+                                                 f"got {spec.gripper_mirror_actuator!r}")
     for fld in ("gripper_open", "gripper_closed"):
         set_(spec, fld, _number(r, fld, getattr(spec, fld)))
     if spec.gripper_open == spec.gripper_closed:
@@ -278,15 +288,20 @@ def _validate_against_mjcf(spec: RobotSpec, m: mujoco.MjModel) -> None:
     _lookup(r, "ee_site", m, S, m.nsite, spec.ee_site)
     for name in spec.gripper_joints:
         _lookup(r, "gripper_joints", m, J, m.njnt, name)
-    gid = _lookup(r, "gripper_actuator", m, A, m.nu, spec.gripper_actuator)
-    if gid in [mujoco.mj_name2id(m, A, a) for a in spec.arm_actuators]:
-        raise _err(r, "gripper_actuator", f"{spec.gripper_actuator!r} is also an arm actuator")
-    if m.actuator_ctrllimited[gid]:
-        lo, hi = m.actuator_ctrlrange[gid]
-        for fld in ("gripper_open", "gripper_closed"):
-            val = getattr(spec, fld)
-            if not lo - 1e-12 <= val <= hi + 1e-12:
-                raise _err(r, fld, f"{val!r} is outside actuator {spec.gripper_actuator!r} ctrlrange [{float(lo)}, {float(hi)}]")
+    gripper = [(spec.gripper_actuator, 1.0, "gripper_actuator")]
+    if spec.gripper_mirror_actuator is not None:
+        gripper.append((spec.gripper_mirror_actuator, -1.0, "gripper_mirror_actuator"))
+    for name, sign, fld_a in gripper:
+        gid = _lookup(r, fld_a, m, A, m.nu, name)
+        if gid in [mujoco.mj_name2id(m, A, a) for a in spec.arm_actuators]:
+            raise _err(r, fld_a, f"{name!r} is also an arm actuator")
+        if m.actuator_ctrllimited[gid]:
+            lo, hi = m.actuator_ctrlrange[gid]
+            for fld in ("gripper_open", "gripper_closed"):
+                val = sign * getattr(spec, fld)
+                if not lo - 1e-12 <= val <= hi + 1e-12:
+                    raise _err(r, fld, f"{val!r} (sent to {name!r}) is outside that actuator's ctrlrange "
+                                       f"[{float(lo)}, {float(hi)}]")
 
 
 def _resolve_spec_path(name_or_path: str | Path) -> Path:
@@ -319,15 +334,15 @@ def load_robot_spec(name_or_path: str | Path) -> RobotSpec:
     if not isinstance(robot, str) or not robot:
         raise RobotModelError(f"robot spec {label!r}: name must be a non-empty string, got {robot!r}")
 
-    def check_keys(table: dict, expected: set[str] | tuple[str, ...], where: str) -> None:
+    def check_keys(table: dict, expected: set[str] | tuple[str, ...], where: str, optional=frozenset()) -> None:
         missing = sorted(set(expected) - set(table))
-        unknown = sorted(set(table) - set(expected))
+        unknown = sorted(set(table) - set(expected) - set(optional))
         if missing:
             raise _err(robot, where, f"missing key(s) {missing} in {label!r}")
         if unknown:
-            raise _err(robot, where, f"unknown key(s) {unknown} in {label!r}; valid keys: {sorted(expected)}")
+            raise _err(robot, where, f"unknown key(s) {unknown} in {label!r}; valid keys: {sorted(set(expected) | set(optional))}")
 
-    check_keys(raw, _TOP_KEYS, "spec")
+    check_keys(raw, _TOP_KEYS, "spec", _OPTIONAL_TOP_KEYS)
     for table in ("limits", "gains"):
         if not isinstance(raw[table], dict):
             raise _err(robot, table, f"must be a [{table}] table, got {raw[table]!r}")
@@ -349,6 +364,7 @@ def load_robot_spec(name_or_path: str | Path) -> RobotSpec:
         gripper_open=raw["gripper_open"],
         gripper_closed=raw["gripper_closed"],
         home_q=raw["home_q"],
+        gripper_mirror_actuator=raw.get("gripper_mirror_actuator"),
         **{k: raw["limits"][k] for k in _LIMIT_KEYS},
         **{k: raw["gains"][k] for k in _GAIN_KEYS},
     )

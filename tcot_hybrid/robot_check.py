@@ -4,8 +4,9 @@ grasp?
 1. The spec and the MJCF (``load_robot_spec``: names, types, limits, sanity bounds).
 2. Pinocchio against MuJoCo (TCP pose and mass matrix at two postures), always, whatever IK backend
    a run later uses: the controllers' dynamics and the Pinocchio IK both depend on it.
-3. The gripper: the opening it can reach, collision pads on the finger joints' own bodies (the stack reads
-   finger contacts there), and how many actuators move the fingers (the stack drives one).
+3. The gripper: the opening it can reach, collision pads on each finger (its joint's body or the bodies
+   under it), and that every actuator moving the fingers is driven (``gripper_actuator`` and an optional
+   mirrored ``gripper_mirror_actuator``).
 4. Reach: a top-down grasp (TCP pointing down, fingers closing along world y, as every plan uses) and its
    approach point above it, solved by IK on a grid over the task workspace and at every grasp and release
    point of every task over a set of seeded layouts. ``reachable_fraction`` is the workspace share; a PNG
@@ -58,14 +59,15 @@ class ReachSolver:
         self.spec = spec
         self.ik = make_ik("pinocchio", spec, IKConfig(max_iters=300, posture_cost=0.0))
 
-    def solve(self, pos, seed=None) -> tuple[bool, np.ndarray, float]:
-        """(reachable, q, position error [m]) of a top-down TCP pose at ``pos`` [m, world]."""
+    def solve(self, pos, seed=None, rot=R_DOWN) -> tuple[bool, np.ndarray, float]:
+        """(reachable, q, position error [m]) of the TCP pose (``pos`` [m], ``rot``) in the robot's base frame."""
         from tcot_hybrid.ik import IKTarget
 
         best = None
         seeds = [self.spec.home_q] if seed is None else [seed, self.spec.home_q]
         for s in seeds:
-            res = self.ik.solve(IKTarget(pos=np.asarray(pos, dtype=float), rot=R_DOWN), np.asarray(s, dtype=float))
+            res = self.ik.solve(IKTarget(pos=np.asarray(pos, dtype=float), rot=np.asarray(rot, dtype=float)),
+                                np.asarray(s, dtype=float))
             ok = res.pos_err <= REACH_TOL_M and res.rot_err <= REACH_TOL_RAD
             if ok:
                 return True, res.q, float(res.pos_err)
@@ -73,11 +75,12 @@ class ReachSolver:
                 best = (False, res.q, float(res.pos_err))
         return best
 
-    def grasp(self, pos, seed=None) -> tuple[bool, np.ndarray, float]:
-        """A grasp at ``pos`` counts when its approach point (APPROACH_DZ above) and the grasp itself solve."""
-        p = np.asarray(pos, dtype=float)
-        ok_a, qa, ea = self.solve(p + [0.0, 0.0, APPROACH_DZ], seed)
-        ok_g, qg, eg = self.solve(p, qa)
+    def grasp(self, pos, seed=None, rot=R_DOWN) -> tuple[bool, np.ndarray, float]:
+        """A grasp at ``pos`` counts when its approach point (APPROACH_DZ back along the TCP's approach axis:
+        above it, for a top-down grasp) and the grasp itself solve. Base frame."""
+        p, R = np.asarray(pos, dtype=float), np.asarray(rot, dtype=float)
+        ok_a, qa, ea = self.solve(p - APPROACH_DZ * R[:, 2], seed, R)
+        ok_g, qg, eg = self.solve(p, qa, R)
         return ok_a and ok_g, qg, max(ea, eg)
 
 
@@ -112,30 +115,34 @@ def workspace_map(solver: ReachSolver, *, step_m: float = GRID_STEP_M, z: float 
     return {"x": xs, "y": ys, "z": z, "reachable": ok, "pos_err_m": err}
 
 
-def task_points(task_name: str, spec: RobotSpec, seeds) -> dict[str, list[np.ndarray]]:
+def task_points(task_name: str, spec: RobotSpec, seeds) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """Grasp points (gripper closes) and release points (gripper opens) of the task's oracle script over
-    the seeded layouts, from each layout's initial state."""
+    the seeded layouts, from each layout's initial state, as (position, rotation) in the robot's base frame."""
     from tcot_hybrid.config import TimingConfig
     from tcot_hybrid.scene import SceneConfig
     from tcot_hybrid.sim import Simulation
     from tcot_hybrid.tasks import make_task
 
     task = make_task(task_name)
+    task.set_episode(seed=0, init=None)
     sim = Simulation(spec, task, timing=TimingConfig(), scene=SceneConfig())
-    out: dict[str, list[np.ndarray]] = {"grasp": [], "release": []}
+    out: dict[str, list] = {"grasp": [], "release": []}
     try:
         for seed in seeds:
+            task.set_episode(seed=seed, init=None)
             sim.reset(np.random.default_rng(seed))
-            out_g, out_r = layout_points(task, sim.world)
-            out["grasp"] += out_g
-            out["release"] += out_r
+            g, r = layout_points(task, sim.world, sim.T_base_world)
+            out["grasp"] += g
+            out["release"] += r
     finally:
         sim.close()
     return out
 
 
-def layout_points(task, world) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """(grasp points, release points) of ``task``'s script in the current layout of ``world``."""
+def layout_points(task, world, T_base_world=None) -> tuple[list, list]:
+    """(grasp points, release points) of ``task``'s script in the current layout of ``world``, each a
+    (position [m], rotation) pair in the robot's base frame (``T_base_world``; identity in the workcell)."""
+    T = np.eye(4) if T_base_world is None else np.asarray(T_base_world, dtype=float)
     grasps, releases = [], []
     closed = False
     for skill in task.skills():
@@ -144,25 +151,29 @@ def layout_points(task, world) -> tuple[list[np.ndarray], list[np.ndarray]]:
         except Exception:  # noqa: BLE001 - a skill that needs an earlier one done first: skip its points
             continue
         for kf in kfs:
+            rot = R_DOWN if getattr(kf, "rot", None) is None else np.asarray(kf.rot, dtype=float)
+            point = (T[:3, :3] @ np.asarray(kf.pos, dtype=float) + T[:3, 3], T[:3, :3] @ rot)
             if kf.closed and not closed:
-                grasps.append(np.array(kf.pos, dtype=float))
+                grasps.append(point)
             elif closed and not kf.closed:
-                releases.append(np.array(kf.pos, dtype=float))
+                releases.append(point)
             closed = kf.closed
     return grasps, releases
 
 
-def unreachable_targets(spec: RobotSpec, task, world) -> list[dict]:
-    """Grasp and release points of this episode's layout that the robot cannot reach top-down (checked
-    before the episode; empty when all are reachable)."""
+def unreachable_targets(spec: RobotSpec, task, world, T_base_world=None) -> list[dict]:
+    """Grasp and release points of this episode's layout that the robot cannot reach (checked before the
+    episode; empty when all are reachable). Positions in the report are world coordinates."""
     solver = reach_solver(spec)
-    grasps, releases = layout_points(task, world)
+    grasps, releases = layout_points(task, world, T_base_world)
+    T_wb = np.eye(4) if T_base_world is None else np.linalg.inv(np.asarray(T_base_world, dtype=float))
     bad = []
     for kind, pts in (("grasp", grasps), ("release", releases)):
-        for p in pts:
-            ok, _, err = solver.grasp(p)
+        for p, R in pts:
+            ok, _, err = solver.grasp(p, rot=R)
             if not ok:
-                bad.append({"target": kind, "pos": [round(float(v), 4) for v in p], "pos_err_m": round(err, 4)})
+                pw = T_wb[:3, :3] @ p + T_wb[:3, 3]
+                bad.append({"target": kind, "pos": [round(float(v), 4) for v in pw], "pos_err_m": round(err, 4)})
     return bad
 
 
@@ -187,14 +198,17 @@ def gripper_checks(spec: RobotSpec) -> list[Check]:
                             severity="warning"))
     for name, j in zip(spec.gripper_joints, jids):
         body = m.jnt_bodyid[j]
-        own = [g for g in range(m.ngeom) if m.geom_bodyid[g] == body and (m.geom_contype[g] or m.geom_conaffinity[g])]
-        child = [g for g in range(m.ngeom) if m.body_parentid[m.geom_bodyid[g]] == body
-                 and (m.geom_contype[g] or m.geom_conaffinity[g])]
-        ok = bool(own)
-        detail = (f"finger joint {name!r}: {len(own)} collision geom(s) on its body {m.body(body).name!r}"
-                  + (f"; {len(child)} more in child bodies, which the stack does not read as finger contacts: "
-                     f"put the pads on the finger joint's own body" if child else ""))
-        checks.append(Check(f"finger pads ({name})", ok and not child, detail))
+
+        def in_subtree(b: int) -> bool:
+            while b > 0 and b != body:
+                b = int(m.body_parentid[b])
+            return b == body
+
+        pads = [g for g in range(m.ngeom) if in_subtree(int(m.geom_bodyid[g]))
+                and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        checks.append(Check(f"finger pads ({name})", bool(pads),
+                            f"finger joint {name!r}: {len(pads)} collision geom(s) on its body {m.body(body).name!r} "
+                            f"and the bodies under it" + ("" if pads else ": the finger cannot touch an object")))
     movers = []
     for a in range(m.nu):
         trn = m.actuator_trntype[a]
@@ -205,12 +219,12 @@ def gripper_checks(spec: RobotSpec) -> list[Check]:
             adr, num = m.tendon_adr[t], m.tendon_num[t]
             if any(m.wrap_objid[k] in jids for k in range(adr, adr + num)):
                 movers.append(m.actuator(a).name)
-    extra = [a for a in movers if a != spec.gripper_actuator]
+    driven = [a for a in (spec.gripper_actuator, spec.gripper_mirror_actuator) if a]
+    extra = [a for a in movers if a not in driven]
     checks.append(Check("finger actuators", not extra,
-                        f"actuators moving the fingers: {movers or 'none'}; the stack drives only "
-                        f"{spec.gripper_actuator!r}" + (f", so {extra} would stay at ctrl 0: couple the fingers "
-                                                        f"(tendon + equality) under one actuator" if extra else ""),
-                        severity="error" if extra else "error"))
+                        f"actuators moving the fingers: {movers or 'none'}; the stack drives {driven}"
+                        + (f", so {extra} would stay at ctrl 0: couple the fingers (tendon + equality) under one "
+                           f"actuator, or name a mirrored second one as gripper_mirror_actuator" if extra else "")))
     return checks
 
 
@@ -252,11 +266,11 @@ def check_robot(name_or_path: str | Path, *, tasks: list[str] | None = None, see
         pts = task_points(name, spec, range(seeds))
         entry = {"task": name}
         for kind in ("grasp", "release"):
-            res = [solver.grasp(p) for p in pts[kind]]
+            res = [solver.grasp(p, rot=R) for p, R in pts[kind]]
             n_ok = sum(r[0] for r in res)
             entry[f"{kind}_points"] = len(res)
             entry[f"{kind}_reachable_fraction"] = round(n_ok / len(res), 4) if res else None
-            marks += [(kind, p, r[0]) for p, r in zip(pts[kind], res)]
+            marks += [(kind, p, r[0]) for (p, _), r in zip(pts[kind], res)]
         fr = [entry[f"{k}_reachable_fraction"] for k in ("grasp", "release") if entry[f"{k}_reachable_fraction"] is not None]
         entry["reachable_fraction"] = round(min(fr), 4) if fr else None
         per_task.append(entry)

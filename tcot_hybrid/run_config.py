@@ -28,12 +28,19 @@ from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.smoothing import SmoothingConfig
 from tcot_hybrid.supervision import SupervisorConfig
 
+INIT_MODES = ("shipped", "sampled")
+
+
 @dataclass(frozen=True, kw_only=True)
 class RunConfig:
     """One episode: what to run (names) and how (component configs).
 
-    task/robot/controller/ik/planner: registry names (``tcot list`` shows them).
+    task/robot/controller/ik/planner: registry names (``tcot list`` shows them). robot "auto" = the task's
+        own robot: panda in the workcell, libero_panda on a LIBERO task (its scenes mount that Panda).
     seed: episode seed; the same seed and config give a bit-identical run.
+    init: how the episode's scene is laid out: "shipped" (a LIBERO task's shipped init state number
+        seed mod N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
+        task's default (LIBERO: shipped; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
     """
 
@@ -41,13 +48,14 @@ class RunConfig:
     """Task name (`tcot list`)."""
     seed: int = 0
     """Episode seed; the same seed and config replay bit-identically."""
-    robot: str = "panda"
-    """A bundled robot name (`tcot list`) or the path of your own robot's robot.toml (or its folder).
-    Check your own with `tcot robot check PATH` (docs/robot_spec.md)."""
+    robot: str = "auto"
+    """A bundled robot name (`tcot list`; "auto" = the task's own robot), or the path of your own robot's
+    robot.toml (or its folder). Check your own with `tcot robot check PATH` (docs/robot_spec.md)."""
     controller: str = "computed_torque"
     ik: str = "mink"
     planner: str = "oracle"
     checkpoint: str | None = None
+    init: str | None = None
     controller_params: dict[str, float] = field(default_factory=dict)
     timing: TimingConfig = field(default_factory=TimingConfig)
     scene: SceneConfig = field(default_factory=SceneConfig)
@@ -65,6 +73,12 @@ class RunConfig:
         for name in ("task", "robot", "controller", "ik", "planner"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ConfigError(f"{name} must be a non-empty name, got {getattr(self, name)!r}")
+        if self.init is not None and self.init not in INIT_MODES:
+            raise ConfigError(f"init = {self.init!r} is not one of {', '.join(INIT_MODES)} (or null: the task's default)")
+        if self.robot == "auto":  # resolved once, so records and checkpoints name the robot that ran
+            from tcot_hybrid.tasks.registry import default_robot
+
+            object.__setattr__(self, "robot", default_robot(self.task))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -7,11 +7,16 @@ multisampling, few simple geoms.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from tcot_hybrid.config import require_int, require_positive
+
+if TYPE_CHECKING:
+    from tcot_hybrid.robot import RobotSpec
+    from tcot_hybrid.tasks.objects import ObjectInfo
 
 GEOM = mujoco.mjtGeom
 TABLE_TOP_Z = 0.0  # [m] the table surface is the world's z = 0 plane (robot base sits on it)
@@ -48,12 +53,47 @@ class SceneConfig:
 
                 raise ConfigError(f"{name} = {getattr(self, name)} px is above the {top} px maximum (an offscreen "
                                   f"buffer that size takes gigabytes and minutes per frame)")
-        if self.planner_camera not in CAMERAS:
+        if not isinstance(self.planner_camera, str) or not self.planner_camera:
             from tcot_hybrid.errors import ConfigError
 
-            raise ConfigError(
-                f"planner_camera = {self.planner_camera!r} is not a scene camera; choose one of {', '.join(CAMERAS)}"
-            )
+            raise ConfigError(f"planner_camera must be a camera name, got {self.planner_camera!r}")
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class BuiltScene:
+    """A compiled world, whoever built it (the workcell here, or a LIBERO scene).
+
+    objects:       the task's objects by name (what the predicates, the oracle and perturbations know)
+    support_z:     world height of the surface objects rest on [m] (the table top; 0 in the workcell)
+    render_option: scene option for every render (e.g. collision geoms hidden), None for MuJoCo's default
+    """
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    objects: dict[str, "ObjectInfo"]
+    support_z: float = TABLE_TOP_Z
+    render_option: mujoco.MjvOption | None = None
+    scene_flags_off: tuple[int, ...] = ()  # mjtRndFlag values switched off in every renderer (e.g. skybox)
+
+
+def check_camera(model: mujoco.MjModel, name: str) -> None:
+    """The planner camera must exist in the compiled scene (error lists the scene's cameras)."""
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name) < 0:
+        from tcot_hybrid.errors import ConfigError
+
+        cams = [model.camera(i).name for i in range(model.ncam)]
+        raise ConfigError(f"planner_camera = {name!r} is not a camera of this scene; choose one of {', '.join(cams)}")
+
+
+def build_workcell_scene(robot: "RobotSpec", add_objects, *, config: SceneConfig, sim_dt: float) -> BuiltScene:
+    """This project's workcell around ``robot`` with the objects ``add_objects(spec)`` adds, compiled."""
+    from tcot_hybrid.robot import robot_mjspec
+
+    spec = build_workcell(robot_mjspec(robot), config=config, sim_dt=sim_dt)
+    objects = add_objects(spec)
+    model = spec.compile()
+    check_camera(model, config.planner_camera)
+    return BuiltScene(model=model, data=mujoco.MjData(model), objects=objects)
 
 
 # name -> (position [m], look-at point [m], vertical field of view [deg])

@@ -1,4 +1,8 @@
-"""The simulated workcell: compiled MuJoCo model of robot + scene + task objects, stepping and rendering.
+"""The simulated world: compiled MuJoCo model of robot + scene + task objects, stepping and rendering.
+
+The task builds the scene (``Task.build_scene``): this project's workcell, or a LIBERO scene. Either way the
+simulation exposes the same robot measurements, gripper commands, rendering and fault polling, plus the
+world<->base transform (``T_world_base``): IK works in the robot's own base frame, plans in the world.
 
 Stepping is split (``mj_step1`` → control → ``mj_step2``) so controllers see dynamics quantities of the
 current state at no extra cost. Every step polls MuJoCo's warning counters: MuJoCo silently resets the
@@ -13,8 +17,8 @@ import numpy as np
 
 from tcot_hybrid.config import TimingConfig
 from tcot_hybrid.errors import SimulationError
-from tcot_hybrid.robot import RobotSpec, robot_mjspec
-from tcot_hybrid.scene import SceneConfig, build_workcell
+from tcot_hybrid.robot import RobotSpec
+from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.tasks import Task, World
 
 # Warnings that mean the physics state can no longer be trusted.
@@ -27,7 +31,7 @@ FATAL_WARNINGS = (
 _FATAL_IDX = np.array([int(k) for k in FATAL_WARNINGS])
 
 
-OBJECT_FLOOR_Z = -0.05  # [m] an object this far below the table top has fallen through it
+OBJECT_FLOOR_DZ = 0.05  # [m] an object this far below the support surface has fallen through it
 
 
 @dataclass(frozen=True)
@@ -44,21 +48,30 @@ class Simulation:
 
     def __init__(self, robot: RobotSpec, task: Task, *, timing: TimingConfig, scene: SceneConfig):
         self.robot, self.task, self.timing, self.scene_config = robot, task, timing, scene
-        spec = build_workcell(robot_mjspec(robot), config=scene, sim_dt=timing.sim_dt)
-        self.objects = task.add_objects(spec)
-        self.model = spec.compile()
-        self.data = mujoco.MjData(self.model)
+        built = task.build_scene(robot, timing=timing, scene=scene)
+        self.model, self.data, self.objects = built.model, built.data, built.objects
+        self.support_z = built.support_z  # [m] world height of the surface objects rest on
+        self.render_option = built.render_option
+        self._scene_flags_off = built.scene_flags_off
         m = self.model
         self.arm_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.arm_joints])
         self.arm_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in robot.arm_joints])
         self.arm_act = np.array([m.actuator(a).id for a in robot.arm_actuators])
         self.gripper_act = m.actuator(robot.gripper_actuator).id
+        # Every finger actuator and the sign of the command it gets (a mirrored second finger gets -ctrl).
+        self._grip_acts = np.array([self.gripper_act] + ([m.actuator(robot.gripper_mirror_actuator).id]
+                                                         if robot.gripper_mirror_actuator else []), dtype=int)
+        self._grip_sign = np.array([1.0, -1.0][: self._grip_acts.size])
         self.gripper_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.gripper_joints])
-        finger_bodies = [m.jnt_bodyid[m.joint(j).id] for j in robot.gripper_joints]
-        finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if m.geom_bodyid[g] == b) for b in finger_bodies)
+        finger_bodies = [int(m.jnt_bodyid[m.joint(j).id]) for j in robot.gripper_joints]
+        finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if _in_subtree(m, int(m.geom_bodyid[g]), b))
+                             for b in finger_bodies)  # a finger's pads may sit in child bodies (robosuite)
         self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms,
-                           gripper=((self.gripper_act, robot.gripper_open, robot.gripper_closed),))
+                           gripper=tuple((int(a), sign * robot.gripper_open, sign * robot.gripper_closed)
+                                         for a, sign in zip(self._grip_acts, self._grip_sign)))
         self.ee_site = m.site(robot.ee_site).id
+        self.T_world_base = base_transform(robot, m, self.data)
+        self.T_base_world = np.linalg.inv(self.T_world_base)
         self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._fault: SimFault | None = None
@@ -66,21 +79,26 @@ class Simulation:
 
     # --- episode lifecycle ------------------------------------------------------------------------
     def reset(self, rng: np.random.Generator) -> None:
-        """Robot at home with the gripper open, objects placed by the task (seeded)."""
+        """Robot at home with the gripper open, objects placed by the task (seeded; a LIBERO task may also set
+        the robot, from its shipped init state)."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         d.qpos[self.arm_qpos] = self.robot.home_q
         d.qpos[self.gripper_qpos] = self._finger_open()
-        d.ctrl[self.gripper_act] = self.robot.gripper_open
         self.task.reset(self.world, rng)
+        self.set_gripper(False)  # after the task: LIBERO's reset clears every ctrl
         mujoco.mj_forward(m, d)
         self._fault = None
         self._time_offset = 0.0
         d.warning.number[:] = 0
 
-    def _finger_open(self) -> float:
-        j = self.model.joint(self.robot.gripper_joints[0]).id
-        return float(self.model.jnt_range[j][1])
+    def _finger_open(self) -> np.ndarray:
+        """Each finger joint at its open end (the end of its range farther from zero)."""
+        out = []
+        for name in self.robot.gripper_joints:
+            lo, hi = self.model.jnt_range[self.model.joint(name).id]
+            out.append(hi if abs(hi) >= abs(lo) else lo)
+        return np.array(out)
 
     # --- stepping ---------------------------------------------------------------------------------
     def step1(self) -> None:
@@ -107,7 +125,8 @@ class Simulation:
             self._fault = SimFault(self.time_s, kind.name, int(counts[int(kind)]))
             return
         # An object pushed through the table falls forever without any MuJoCo warning: a fault too.
-        if self._object_bodies.size and self.data.xpos[self._object_bodies, 2].min() < OBJECT_FLOOR_Z:
+        if self._object_bodies.size and \
+                self.data.xpos[self._object_bodies, 2].min() < self.support_z - OBJECT_FLOOR_DZ:
             self._fault = SimFault(self.time_s, "OBJECT_BELOW_TABLE", 1)
 
     @property
@@ -125,7 +144,8 @@ class Simulation:
             raise SimulationError(f"simulation diverged at t={self._fault.time_s:.3f}s: {self._fault.warning}")
 
     def set_gripper(self, closed: bool) -> None:
-        self.data.ctrl[self.gripper_act] = self.robot.gripper_closed if closed else self.robot.gripper_open
+        value = self.robot.gripper_closed if closed else self.robot.gripper_open
+        self.data.ctrl[self._grip_acts] = self._grip_sign * value
 
     # --- measurements -----------------------------------------------------------------------------
     @property
@@ -146,7 +166,10 @@ class Simulation:
     def renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)
         if key not in self._renderers:
-            self._renderers[key] = mujoco.Renderer(self.model, height=height, width=width)
+            r = mujoco.Renderer(self.model, height=height, width=width)
+            for flag in self._scene_flags_off:
+                r.scene.flags[flag] = 0
+            self._renderers[key] = r
         return self._renderers[key]
 
     def render(self, camera: str, width: int, height: int, *, depth: bool = False,
@@ -154,7 +177,10 @@ class Simulation:
         """RGB (or depth [m]) image; ``markers`` = [(points (N,3) [m], rgba)] drawn as small spheres in
         the scene (e.g. a lifted 3D path) — for videos only, never for planner images."""
         r = self.renderer(width, height)
-        r.update_scene(self.data, camera=camera)
+        if self.render_option is None:
+            r.update_scene(self.data, camera=camera)
+        else:
+            r.update_scene(self.data, camera=camera, scene_option=self.render_option)
         for points, rgba in markers or ():
             scn = r.scene
             for p in points:
@@ -174,3 +200,44 @@ class Simulation:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+        self.task.release_scene()
+
+
+def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0 and body != root:
+        body = int(model.body_parentid[body])
+    return body == root
+
+
+def _pose(xpos, xmat) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = np.asarray(xmat).reshape(3, 3), xpos
+    return T
+
+
+def robot_root_body(model: mujoco.MjModel, first_arm_joint: str) -> int:
+    """The robot's root body: the ancestor of the first arm joint's body that hangs off the world body."""
+    b = int(model.jnt_bodyid[model.joint(first_arm_joint).id])
+    while model.body_parentid[b] != 0:
+        b = int(model.body_parentid[b])
+    return b
+
+
+def base_transform(robot: RobotSpec, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """T_world_base (4x4): maps a point of the robot's own MJCF frame (where Pinocchio and mink solve IK) into
+    the scene's world frame. Identity in the workcell (the robot is the scene's base); a LIBERO robot sits at
+    e.g. (-0.66, 0, 0.912). Measured from the robot's root body, which is fixed in both models."""
+    mujoco.mj_kinematics(model, data)
+    root = robot_root_body(model, robot.arm_joints[0])
+    name = model.body(root).name
+    own = mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
+    own_d = mujoco.MjData(own)
+    mujoco.mj_kinematics(own, own_d)
+    try:
+        own_root = own.body(name).id
+    except KeyError:
+        from tcot_hybrid.errors import RobotModelError
+
+        raise RobotModelError(f"robot {robot.name!r}: the scene's robot root body {name!r} is not in its MJCF "
+                              f"{str(robot.mjcf_path)!r}") from None
+    return _pose(data.xpos[root], data.xmat[root]) @ np.linalg.inv(_pose(own_d.xpos[own_root], own_d.xmat[own_root]))

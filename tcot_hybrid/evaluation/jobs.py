@@ -41,11 +41,12 @@ def task_code_digest() -> str:
     other task code is not credited on resume (e.g. the oracle's hook clearance changed)."""
     import hashlib
 
-    from tcot_hybrid import tasks
+    from tcot_hybrid import libero, tasks
 
     h = hashlib.sha256()
-    for f in sorted(Path(tasks.__file__).parent.glob("*.py")):
-        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    for pkg in (tasks, libero):  # LIBERO's goal-driven oracle lives in tcot_hybrid/libero
+        for f in sorted(Path(pkg.__file__).parent.glob("*.py")):
+            h.update(f.name.encode() + b"\0" + f.read_bytes())
     return h.hexdigest()[:16]
 
 

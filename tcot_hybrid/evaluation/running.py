@@ -28,6 +28,7 @@ def run_job(job: Job) -> dict:
     from tcot_hybrid.episode import EpisodeRunner
 
     c = job.cfg
+    runner = None
     try:
         runner = EpisodeRunner(c)
         probe = c.supervisor.mode.startswith("glsr")
@@ -37,6 +38,9 @@ def run_job(job: Job) -> dict:
         rec = {"task": c.task, "planner": c.planner, "mode": c.supervisor.mode, "robot": c.robot,
                "controller": c.controller, "ik": c.ik, "seed": c.seed, "success": False,
                "fault": f"crash:{type(exc).__name__}: {exc}"}
+    finally:
+        if runner is not None:  # frees renderers; a LIBERO scene stays built for this worker's next episode
+            runner.stack.sim.close()
     rec["perturb"] = job.perturb
     rec["sweep"] = job.sweep
     rec["key"] = job.key

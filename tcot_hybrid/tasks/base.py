@@ -32,10 +32,12 @@ HOOK_CLEARANCE_M = 0.065
 
 @dataclass(frozen=True)
 class Keyframe:
-    """A TCP position [m, world] and the gripper command to hold from here on."""
+    """A TCP position [m, world], the gripper command to hold from here on, and optionally the TCP orientation
+    (3x3, world; None = top-down, fingers closing along world y: ``robot.R_DOWN``)."""
 
     pos: np.ndarray
     closed: bool
+    rot: np.ndarray | None = None
 
 
 class World:
@@ -81,6 +83,10 @@ class World:
 
     def tcp_pos(self) -> np.ndarray:
         return self.data.site_xpos[self._site].copy()
+
+    def tcp_rot(self) -> np.ndarray:
+        """TCP orientation (3x3, world): columns x, y = finger closing axis, z = approach axis."""
+        return self.data.site_xmat[self._site].reshape(3, 3).copy()
 
     def set_pose(self, name: str, pos, yaw: float = 0.0) -> None:
         """Place a free object at pos [m] with yaw [rad] about world z, at rest."""
@@ -270,12 +276,46 @@ class HookPull(Skill):
 
 
 class Task(ABC):
-    """A manipulation task: objects, a seeded layout, a success predicate and an oracle script."""
+    """A manipulation task: objects, a seeded layout, a success predicate and an oracle script.
+
+    The scene comes from ``build_scene``: this project's workcell by default; a LIBERO task builds its own.
+    ``default_robot`` is the robot the task is meant for when the run names none (None: the run's default);
+    ``init_modes`` are the ``--init`` choices the task knows, the first being its default.
+    """
 
     name: ClassVar[str]
     suite: ClassVar[str]
     instruction: ClassVar[str]
     time_limit_s: ClassVar[float] = 30.0
+    settle_s: ClassVar[float] = 0.2  # [s] objects settle (robot holding home) before the first planner step
+    default_robot: ClassVar[str | None] = None
+    init_modes: ClassVar[tuple[str, ...]] = ("sampled",)
+    world_kind: ClassVar[str] = "workcell"  # "workcell" or "libero"
+
+    def build_scene(self, robot, *, timing, scene):
+        """Compile robot + scene + this task's objects into a :class:`tcot_hybrid.scene.BuiltScene`."""
+        from tcot_hybrid.scene import build_workcell_scene
+
+        return build_workcell_scene(robot, self.add_objects, config=scene, sim_dt=timing.sim_dt)
+
+    def cameras(self) -> tuple[str, ...]:
+        """Camera names the task's scene has (checked before anything is built)."""
+        from tcot_hybrid.scene import CAMERAS
+
+        return tuple(CAMERAS)
+
+    def release_scene(self) -> None:
+        """The simulation built from ``build_scene`` is closed (a LIBERO task keeps its scene for reuse)."""
+
+    def set_episode(self, *, seed: int, init: str | None) -> None:
+        """Choose how ``reset`` lays the scene out for the episode ``seed``: ``init`` is one of ``init_modes``
+        (None: the first). Workcell tasks always sample a fresh layout from the seed."""
+        from tcot_hybrid.errors import ConfigError
+
+        if init is not None and init not in self.init_modes:
+            raise ConfigError(f"init = {init!r} is not available for task {self.name!r}; choose one of "
+                              f"{', '.join(self.init_modes)}")
+        self.episode_seed, self.init = seed, init or self.init_modes[0]
 
     @abstractmethod
     def add_objects(self, spec: mujoco.MjSpec) -> dict[str, ObjectInfo]:

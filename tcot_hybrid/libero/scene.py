@@ -1,0 +1,189 @@
+"""A LIBERO scene as a :class:`tcot_hybrid.scene.BuiltScene`: LIBERO builds it, this stack drives it.
+
+LIBERO (through robosuite 1.4) parses the task file, assembles the scene XML and compiles it; from then on
+only its model, data, init states, layout sampler and goal check are used. No robosuite controller ever
+runs: the stack's controllers write the Panda's torque motors at ``ctrl_dt`` and MuJoCo steps the same
+``MjData`` robosuite reads its goal predicates from.
+
+Two changes to LIBERO's scene, both before it compiles: the stack's TCP site (``tcot_tcp``, the same
+site as in ``robots/libero_panda/libero_panda.xml``) is added to ``robot0_link7``, and rendering is set up
+for software GL (no shadows, reflections, skybox or multisampling; collision geoms hidden).
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.libero import require_libero
+from tcot_hybrid.libero.robot_model import LINK7, TCP_SITE
+
+# robosuite's visual geoms are group 1, collision geoms group 0: hide group 0 in every image.
+COLLISION_GROUP = 0
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """LIBERO and robosuite print progress lines to stdout; keep them off it (e.g. `tcot list --json`)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        yield
+
+
+def _tcp_site_xml() -> tuple[str, str]:
+    """The TCP site's pos and quat strings, read from the bundled robot MJCF (one source of truth)."""
+    import xml.etree.ElementTree as ET
+
+    from tcot_hybrid.robot import load_robot_spec
+
+    root = ET.parse(load_robot_spec("libero_panda").mjcf_path).getroot()
+    site = root.find(f".//site[@name='{TCP_SITE}']")
+    return site.get("pos"), site.get("quat")
+
+
+def _env_class(problem_name: str):
+    """LIBERO's env class for the task file's problem, with the TCP site added to the robot before compiling."""
+    from libero.libero.envs import TASK_MAPPING
+
+    base = TASK_MAPPING[problem_name]
+    pos, quat = _tcp_site_xml()
+
+    def _load_model(self):
+        base._load_model(self)
+        link7 = self.model.worldbody.find(f".//body[@name='{LINK7}']")
+        if link7 is None:
+            raise RuntimeError(f"LIBERO's robot has no body {LINK7!r}; this stack knows only the Panda")
+        import xml.etree.ElementTree as ET
+
+        ET.SubElement(link7, "site", name=TCP_SITE, pos=pos, quat=quat, size="0.005", rgba="0 0 0 0", group="5")
+
+    # LIBERO asserts the class name equals the task file's problem name: keep it.
+    return type(base.__name__, (base,), {"_load_model": _load_model, "__module__": __name__})
+
+
+# Built scenes not in use, by (task file, sim_dt): an evaluation worker runs many episodes of one task, and
+# building a scene costs 2.5-4 s against 1-2 s for a whole oracle episode. A Simulation takes a scene out
+# (no two simulations ever share one) and puts it back when it closes.
+_IDLE: dict[tuple[str, float], "LiberoScene"] = {}
+MAX_IDLE = 2
+
+
+@dataclass
+class LiberoScene:
+    """One task file's compiled scene: the robosuite env (goal check, sampler) and the raw MuJoCo model/data."""
+
+    env: object
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    bddl_path: Path
+
+    @classmethod
+    def acquire(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
+        """An idle scene of this task file if one was released in this process, else a new one."""
+        scene = _IDLE.pop((str(bddl_path), sim_dt), None)
+        if scene is not None:
+            _fast_render_settings(scene.model, max_image_px)
+            return scene
+        return cls.build(bddl_path, sim_dt=sim_dt, max_image_px=max_image_px)
+
+    def release(self) -> None:
+        """Done with this scene: keep it for the next episode of the same task in this process."""
+        key = (str(self.bddl_path), float(self.model.opt.timestep))
+        old = _IDLE.pop(key, None)
+        if old is not None and old is not self:
+            old.close()
+        while len(_IDLE) >= MAX_IDLE:
+            _IDLE.pop(next(iter(_IDLE))).close()
+        _IDLE[key] = self
+
+    @classmethod
+    def build(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
+        require_libero()
+        bddl_path = Path(bddl_path)
+        with quiet_stdout():
+            import robosuite
+            import libero.libero.envs.bddl_utils as bddl_utils
+
+            info = bddl_utils.get_problem_info(str(bddl_path))
+            env = _env_class(info["problem_name"])(
+                str(bddl_path), robots=["Panda"],
+                controller_configs=robosuite.load_controller_config(default_controller="OSC_POSE"),
+                gripper_types="default", initialization_noise=None, use_camera_obs=False,
+                has_renderer=False, has_offscreen_renderer=False, hard_reset=False, ignore_done=True,
+                camera_names=["agentview"], control_freq=20, horizon=100000,
+            )
+        model, data = env.sim.model._model, env.sim.data._data
+        model.opt.timestep = sim_dt
+        _fast_render_settings(model, max_image_px)
+        return cls(env=env, model=model, data=data, bddl_path=bddl_path)
+
+    # --- layouts ----------------------------------------------------------------------------------------
+    def sample_layout(self, seed: int) -> None:
+        """A fresh layout from the task file's placement regions (LIBERO's own sampler), seeded. The sampler
+        draws from numpy's global generator, so it is seeded here and restored afterwards."""
+        from robosuite.utils.errors import RandomizationError
+
+        state = np.random.get_state()
+        np.random.seed(seed % 2**32)
+        try:
+            for _ in range(100):
+                try:
+                    with quiet_stdout():
+                        self.env.reset()
+                    break
+                except RandomizationError:
+                    continue
+            else:
+                raise RuntimeError(f"LIBERO could not sample a layout for {self.bddl_path.name} in 100 tries")
+        finally:
+            np.random.set_state(state)
+        if self.env.sim.model._model is not self.model or self.env.sim.data._data is not self.data:
+            raise RuntimeError("LIBERO rebuilt its simulation on reset (hard_reset must stay off)")
+
+    def set_state(self, state: np.ndarray) -> None:
+        """A shipped init state: [time, qpos, qvel] as LIBERO saved it."""
+        m = self.model
+        expected = 1 + m.nq + m.nv
+        if state.shape != (expected,):
+            raise ValueError(f"init state has {state.shape} values, the scene needs ({expected},)")
+        self.data.qpos[:] = state[1:1 + m.nq]
+        self.data.qvel[:] = state[1 + m.nq:]
+        mujoco.mj_forward(m, self.data)
+
+    def goal_reached(self) -> bool:
+        """LIBERO's own goal check (the conjunction of the task file's goal predicates), on the current state."""
+        return bool(self.env._check_success())
+
+    def support_z(self) -> float:
+        """World height objects rest on: the table top where the scene has one, else the floor."""
+        m = self.model
+        sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "table_top")
+        if sid >= 0:
+            mujoco.mj_kinematics(m, self.data)
+            return float(self.data.site_xpos[sid][2])
+        return 0.0
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.env.close()
+
+
+def _fast_render_settings(model: mujoco.MjModel, max_image_px: int) -> None:
+    """Software-GL settings (DESIGN.md, LIBERO): no shadows, no reflections, no multisampling."""
+    model.vis.quality.shadowsize = 0
+    model.vis.quality.offsamples = 0
+    model.mat_reflectance[:] = 0.0
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), max_image_px)
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), max_image_px)
+    model.light_castshadow[:] = 0
+
+
+def render_option() -> mujoco.MjvOption:
+    opt = mujoco.MjvOption()
+    opt.geomgroup[COLLISION_GROUP] = 0
+    return opt

