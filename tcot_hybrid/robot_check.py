@@ -17,7 +17,6 @@ its task's grasp or release points warns before stepping and records ``unreachab
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -84,18 +83,18 @@ class ReachSolver:
         return ok_a and ok_g, qg, max(ea, eg)
 
 
-@functools.lru_cache(maxsize=8)
-def _cached_solver(mjcf: str, mtime_ns: int, spec_id: int) -> ReachSolver:  # noqa: ARG001 - cache keys
-    return ReachSolver(_SPECS[spec_id])
-
-
-_SPECS: dict[int, RobotSpec] = {}
+_SOLVERS: dict[tuple, ReachSolver] = {}
 
 
 def reach_solver(spec: RobotSpec) -> ReachSolver:
     """One solver per robot model and process (episodes of an evaluation share it)."""
-    _SPECS[id(spec)] = spec
-    return _cached_solver(str(spec.mjcf_path), spec.mjcf_path.stat().st_mtime_ns, id(spec))
+    key = (str(spec.mjcf_path), spec.mjcf_path.stat().st_mtime_ns, spec.arm_joints, spec.ee_site,
+           spec.q_min.tobytes(), spec.q_max.tobytes(), spec.v_max.tobytes())
+    if key not in _SOLVERS:
+        if len(_SOLVERS) >= 8:
+            _SOLVERS.clear()
+        _SOLVERS[key] = ReachSolver(spec)
+    return _SOLVERS[key]
 
 
 def workspace_map(solver: ReachSolver, *, step_m: float = GRID_STEP_M, z: float = GRASP_Z) -> dict:

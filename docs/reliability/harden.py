@@ -38,7 +38,7 @@ with contextlib.redirect_stderr(err):
         rc, _ = 99, err.write(f"CRASH {type(e).__name__}: {str(e)[:300]}")
 hwm = next(int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM:'))
 print(json.dumps({"rc": rc, "s": round(time.perf_counter() - t0, 2), "rss_mb": round(hwm / 1024),
-                  "err_chars": len(err.getvalue()), "err": err.getvalue().strip()[:160]}))
+                  "err_chars": len(err.getvalue()), "err": err.getvalue().strip()[:800]}))
 """
 
 
