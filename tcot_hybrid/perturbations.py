@@ -78,6 +78,15 @@ class Perturbation(ABC):
     def fire(self, runner, step: int) -> dict | None:  # noqa: ARG002 - image-only perturbations
         return None
 
+    def cannot_apply(self, task, planner, last_step: int) -> str | None:
+        """Why this perturbation can never fire in an episode of ``task`` with ``planner`` whose last planner
+        step is ``last_step``; None when it can (whether it does depends on the episode). Subclasses add
+        their own reasons to this one."""
+        if self.at_step > last_step:
+            return (f"at_step {self.at_step} is after the episode's last planner step {last_step} "
+                    f"({task.name}: time limit {task.time_limit_s} s)")
+        return None
+
     def on_image(self, image: np.ndarray) -> np.ndarray:
         return image
 
@@ -139,6 +148,11 @@ class TargetMoved(Perturbation):
     default_strength = 0.10
     default_at_step = 5
 
+    def cannot_apply(self, task, planner, last_step):
+        if all(skill.target is None for skill in task.skills()):
+            return f"task {task.name} has no target receptacle (none of its skills places onto or into something)"
+        return super().cannot_apply(task, planner, last_step)
+
     def fire(self, runner, step):
         skill = _first_open_skill(runner)
         if skill is None or skill.target is None:
@@ -175,6 +189,13 @@ class OffCentreGrasp(Perturbation):
     unit = "m"
     default_strength = 0.025
     default_at_step = 1
+
+    def cannot_apply(self, task, planner, last_step):
+        from tcot_hybrid.tasks.base import PickPlace
+
+        if not any(isinstance(s, PickPlace) for s in task.skills()):  # fire() also checks the object's kind
+            return f"task {task.name} has no top-down pick-and-place (the grasp it nudges)"
+        return super().cannot_apply(task, planner, last_step)
 
     def fire(self, runner, step):
         sim = runner.stack.sim
@@ -216,6 +237,11 @@ class CameraNoise(Perturbation):
     unit = "intensity sigma (0-255)"
     default_strength = 12.0
     default_at_step = 0
+
+    def cannot_apply(self, task, planner, last_step):
+        if not planner.needs_image:
+            return f"planner {planner.name!r} does not look at the image"
+        return super().cannot_apply(task, planner, last_step)
 
     def fire(self, runner, step):
         return {"sigma": self.strength}

@@ -24,7 +24,8 @@ def test_listing_and_unknown_name():
 def test_each_perturbation_fires_once_and_is_reproducible(name):
     recs = []
     for _ in range(2):
-        cfg = RunConfig(task="goal_cube_on_plate", seed=4, perturb=PerturbConfig(name=name))
+        planner = "learned" if name == "camera_noise" else "oracle"  # the oracle never looks at the image
+        cfg = RunConfig(task="goal_cube_on_plate", seed=4, planner=planner, perturb=PerturbConfig(name=name))
         recs.append(EpisodeRunner(cfg).run())
     fired = [[e for e in r["events"] if e["kind"] == "perturbation"] for r in recs]
     assert len(fired[0]) == 1, f"{name} should fire exactly once, got {fired[0]}"
@@ -49,3 +50,33 @@ def test_camera_noise_changes_only_the_image():
     r.perturbation.on_step(r, 0)
     noisy = r.perturbation.on_image(img)
     assert noisy.shape == img.shape and noisy.dtype == np.uint8 and not np.array_equal(noisy, img)
+
+
+@pytest.mark.parametrize("task, name, at_step, reason", [
+    ("goal_open_drawer", "target_moved", None, "no target receptacle"),
+    ("tool_pull_cube_with_stick", "target_moved", None, "no target receptacle"),
+    ("tool_pull_cube_with_stick", "offcenter_grasp", None, "no top-down pick-and-place"),
+    ("goal_open_drawer", "offcenter_grasp", None, "no top-down pick-and-place"),
+    ("goal_cube_in_bowl", "arm_push", 100000, "after the episode's last planner step 249"),
+    ("goal_cube_in_bowl", "camera_noise", None, "does not look at the image"),  # the oracle renders nothing
+])
+def test_a_perturbation_that_cannot_apply_is_recorded_as_not_fired(task, name, at_step, reason):
+    rec = EpisodeRunner(RunConfig(task=task, seed=5, perturb=PerturbConfig(name=name, at_step=at_step))).run()
+    assert not [e for e in rec["events"] if e["kind"] == "perturbation"]
+    assert rec["perturbation_fired"] is False and reason in rec["perturbation_note"]
+
+
+def test_fired_perturbation_and_no_perturbation_are_recorded():
+    rec = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=5, perturb=PerturbConfig(name="arm_push"))).run()
+    assert rec["perturbation_fired"] is True and rec["perturbation_note"] is None
+    rec = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=5)).run()
+    assert rec["perturbation_fired"] is None and rec["perturbation_note"] is None
+
+
+def test_run_summary_says_when_a_perturbation_did_not_fire(tmp_path, capsys):
+    from tcot_hybrid import cli
+
+    assert cli.main(["run", "--task", "goal_cube_in_bowl", "--seed", "5", "--perturb", "arm_push",
+                     "--perturb.at-step", "100000", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "perturbation arm_push did NOT fire: at_step 100000" in out and "not a perturbed one" in out
