@@ -174,6 +174,10 @@ class EpisodeRunner:
         self._obs = (step, obs)
         return obs
 
+    def invalidate_observation(self) -> None:
+        """The scene changed within this step (e.g. a perturbation moved the camera): render afresh."""
+        self._obs = None
+
     def settle(self) -> None:
         ex = self.stack.executor
         for _ in range(round(self.stack.task.settle_s / self.cfg.timing.ctrl_dt)):
@@ -308,6 +312,9 @@ class EpisodeRunner:
         except SimulationError as exc:
             self.fault = f"sim_fault:{exc}"
             self.stopped_by = "fault"
+        finally:
+            if self.perturbation is not None:
+                self.perturbation.undo(self)
         wall = time.perf_counter() - t0
         return self.record(wall)
 

@@ -20,11 +20,11 @@ def test_listing_and_unknown_name():
 
 
 @pytest.mark.parametrize("name", ["object_moved", "target_moved", "object_drop", "offcenter_grasp", "arm_push",
-                                  "camera_noise"])
+                                  "camera_noise", "camera_shift", "init_posture"])
 def test_each_perturbation_fires_once_and_is_reproducible(name):
     recs = []
     for _ in range(2):
-        planner = "learned" if name == "camera_noise" else "oracle"  # the oracle never looks at the image
+        planner = "learned" if name.startswith("camera") else "oracle"  # the oracle never looks at the image
         cfg = RunConfig(task="goal_cube_on_plate", seed=4, planner=planner, perturb=PerturbConfig(name=name))
         recs.append(EpisodeRunner(cfg).run())
     fired = [[e for e in r["events"] if e["kind"] == "perturbation"] for r in recs]
@@ -50,6 +50,37 @@ def test_camera_noise_changes_only_the_image():
     r.perturbation.on_step(r, 0)
     noisy = r.perturbation.on_image(img)
     assert noisy.shape == img.shape and noisy.dtype == np.uint8 and not np.array_equal(noisy, img)
+
+
+def test_camera_shift_moves_the_rendered_view_not_the_calibration_and_is_undone():
+    cfg = RunConfig(task="goal_cube_on_plate", seed=0, planner="learned", perturb=PerturbConfig(name="camera_shift"))
+    r = EpisodeRunner(cfg)
+    sim, cam = r.stack.sim, r.stack.camera
+    K, T = cam.K.copy(), cam.T_world_cam.copy()
+    cid = sim.model.camera("agentview").id
+    pos, quat = sim.model.cam_pos[cid].copy(), sim.model.cam_quat[cid].copy()
+    before = r.observe(0).image
+    ev = r.perturbation.on_step(r, 0)
+    moved = np.linalg.norm(ev["moved_m"])
+    assert np.isclose(moved, 0.03, atol=1e-4) and np.isclose(ev["turned_deg"], 3.0)
+    after = r.observe(0).image  # the observation of this step is rendered again, from the shifted camera
+    assert np.abs(after.astype(int) - before).mean() > 2.0
+    np.testing.assert_array_equal(r.stack.camera.K, K)  # the lift keeps the nominal calibration
+    np.testing.assert_array_equal(r.stack.camera.T_world_cam, T)
+    r.perturbation.undo(r)
+    np.testing.assert_array_equal(sim.model.cam_pos[cid], pos)
+    np.testing.assert_array_equal(sim.model.cam_quat[cid], quat)
+
+
+def test_init_posture_starts_inside_the_limits_without_a_reflex():
+    cfg = RunConfig(task="goal_cube_on_plate", seed=5, perturb=PerturbConfig(name="init_posture", strength=0.25))
+    r = EpisodeRunner(cfg)
+    rec = r.run()
+    ev = next(e for e in rec["events"] if e["kind"] == "perturbation")
+    off = np.abs(ev["offset_rad"])
+    assert ev["step"] == 0 and off.max() <= 0.25 and off.max() > 0.05
+    assert rec["tracking_reflexes"] == 0 and rec["max_joint_limit_violation_rad"] <= 0.0
+    assert rec["success"], "the oracle plans from wherever the arm starts"
 
 
 @pytest.mark.parametrize("task, name, at_step, reason", [
