@@ -205,6 +205,11 @@ def gripper_checks(spec: RobotSpec) -> list[Check]:
 
         pads = [g for g in range(m.ngeom) if in_subtree(int(m.geom_bodyid[g]))
                 and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        if not any(m.geom_contype[g] or m.geom_conaffinity[g] for g in range(m.ngeom)):
+            checks.append(Check(f"finger pads ({name})", False, "the MJCF has no collision geoms at all: a kinematic "
+                                "model whose scene brings the geometry (e.g. libero_panda)? pads not checked",
+                                severity="warning"))
+            continue
         checks.append(Check(f"finger pads ({name})", bool(pads),
                             f"finger joint {name!r}: {len(pads)} collision geom(s) on its body {m.body(body).name!r} "
                             f"and the bodies under it" + ("" if pads else ": the finger cannot touch an object")))

@@ -748,6 +748,9 @@ def test_robot_check_gripper_findings(tmp_path):
                        "  </actuator>"))
     checks = {c.name: c for c in gripper_checks(load_robot_spec(two))}
     assert not checks["finger actuators"].ok and "finger2_drive" in checks["finger actuators"].detail
+    lib = {c.name: c for c in gripper_checks(load_robot_spec("libero_panda"))}  # mirrored actuator, geometry-free MJCF
+    assert lib["finger actuators"].ok
+    assert all(c.severity == "warning" for n, c in lib.items() if n.startswith("finger pads"))
 
 
 def test_compute_home_handles_continuous_joints(tmp_path):
@@ -768,3 +771,17 @@ def test_compute_home_handles_continuous_joints(tmp_path):
     q, pe, re_ = solve_home(mjcf, list(spec.arm_joints), spec.ee_site, seed, np.array([0.45, 0.0, 0.35]))
     assert pe < 1e-3 and re_ < 1e-2
     assert -np.pi <= q[-1] < np.pi
+
+
+def test_eval_records_keep_every_event_tcot_run_keeps():
+    """`tcot eval` used to drop gripper, plan_adopted and slow_arrival events (a failure then needed a re-run)."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.evaluation import Job, run_job
+    from tcot_hybrid.run_config import RunConfig
+
+    cfg = RunConfig(task="goal_cube_on_plate", seed=1000)
+    rec = run_job(Job(cfg))
+    run_rec = EpisodeRunner(cfg).run()
+    kinds = [e["kind"] for e in rec["events"]]
+    assert {"gripper", "plan_adopted"} <= set(kinds)
+    assert kinds == [e["kind"] for e in run_rec["events"]]
