@@ -106,6 +106,8 @@ def _first_open_skill(runner):
 def _relocate(runner, name: str, distance: float, rng) -> dict | None:
     """Move a free object ``distance`` [m] in a random direction to a free spot in the workspace."""
     world = runner.stack.sim.world
+    if name not in world.objects:  # e.g. a LIBERO fixture or region (a cabinet, a plate's site): not movable
+        return None
     info = world.objects[name]
     if info.kind == "drawer":  # the cabinet is fixed to the table: shift it sideways instead
         cab = world.model.body(f"{name}_cabinet").id
