@@ -168,7 +168,7 @@ class MotionExecutor:
 
     # --- events -----------------------------------------------------------------------------------
     def event(self, kind: str, **info) -> None:
-        self.events.append({"t": round(float(self.sim.data.time), 4), "kind": kind, **info})
+        self.events.append({"t": round(self.sim.time_s, 4), "kind": kind, **info})
 
     # --- plans ------------------------------------------------------------------------------------
     def set_plan(self, plan: WaypointPlan) -> bool:
@@ -295,6 +295,9 @@ class MotionExecutor:
             return
         if err > self.config.reach_tol_m:
             self.event("slow_arrival", waypoint=i, tcp_err_m=round(err, 4))
+            if bool(self.grip[i]) and not self.sim.gripper_closed_cmd():  # closing where the TCP never got
+                self.event("unreachable_grasp", waypoint=i, tcp_err_m=round(err, 4),
+                           target=[round(float(v), 4) for v in self.points[i]])
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)

@@ -16,9 +16,11 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")  # before anything imports mujoco (spawned workers too)
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import shutil  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -283,6 +285,20 @@ class CollectSummary:
                 f"masks: {self.n_train} train / {self.n_valid} valid")
 
 
+MIN_FREE_BYTES = 16 * 2**20
+"""[bytes] free space kept on the output's disk beyond one demo's uncompressed size: HDF5 crashes the
+process when a write hits a full disk, so collection stops before that with a clear error."""
+
+
+def _check_room(path: Path, rec, written: int) -> None:
+    need = MIN_FREE_BYTES + (sum(a.nbytes for a in rec.arrays.values()) if rec is not None else 0)
+    free = shutil.disk_usage(path.parent).free
+    if free < need:
+        raise DatasetError(f"the disk holding {path} is (nearly) full: {free / 2**20:.1f} MiB free, a demo needs up "
+                           f"to {need / 2**20:.1f} MiB; stopped before writing. The {written} demos written in this "
+                           f"run and all earlier ones are kept; free space and re-run the same command to resume")
+
+
 def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, workers: int = 2,
             valid_every: int = VALID_EVERY, compression: str = "gzip", progress: bool = True,
             perturbs: list[str] | None = None) -> CollectSummary:
@@ -301,6 +317,7 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
     h5 = _open_for_append(path)
     size0 = path.stat().st_size
     written = failed = samples = 0
+    write_failed = False
     crashes: list = []
     n_train = n_valid = 0
     try:
@@ -327,7 +344,13 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                         bar.write(f"crash: task={payload[0]} seed={payload[1]}: {payload[2]}")
                     else:
                         _check_env(path, h5, payload.env_args)
-                        write_demo(h5, payload, compression=compression)
+                        _check_room(path, payload, written)
+                        try:
+                            write_demo(h5, payload, compression=compression)
+                        except OSError as exc:  # HDF5 write failed (e.g. the disk filled up under us)
+                            write_failed = True
+                            raise DatasetError(f"writing a demo to {path} failed ({exc}); the {written} demos "
+                                               f"written before are kept, re-run the same command to resume") from exc
                         written += 1
                         failed += not payload.attrs["success"]
                         samples += payload.attrs["num_samples"]
@@ -338,15 +361,20 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                 pool.join()
         present = len(done)
     finally:
-        try:
-            stale = (written or "mask" not in h5
-                     or int(h5["mask"].attrs.get("valid_every", -1)) != valid_every)
-            if "env_args" in h5["data"].attrs and stale:
-                n_train, n_valid = write_masks(h5, valid_every=valid_every)
-            elif "mask" in h5:
-                n_train, n_valid = len(h5["mask/train"]), len(h5["mask/valid"])
-        finally:
-            h5.close()
+        if write_failed:  # don't write more into a file whose last write failed; just close it
+            with contextlib.suppress(Exception):
+                h5.close()
+        else:
+            try:
+                stale = (written or "mask" not in h5
+                         or int(h5["mask"].attrs.get("valid_every", -1)) != valid_every)
+                if "env_args" in h5["data"].attrs and stale:
+                    _check_room(path, None, written)
+                    n_train, n_valid = write_masks(h5, valid_every=valid_every)
+                elif "mask" in h5:
+                    n_train, n_valid = len(h5["mask/train"]), len(h5["mask/valid"])
+            finally:
+                h5.close()
     wall = time.perf_counter() - t0
     return CollectSummary(path=path, requested=len(pairs), already_present=present, written=written,
                           failed_episodes=failed, crashes=crashes, n_train=n_train, n_valid=n_valid, wall_s=wall,
@@ -422,6 +450,9 @@ def cmd_collect(argv: list[str]) -> int:
     for t in tasks:
         validate_names(dataclasses.replace(base, task=t))
     out = args.out or Path("data") / f"demos_{base.robot}.hdf5"
+    from tcot_hybrid.jsonio import check_output_file
+
+    check_output_file(out, what="--out")  # read-only, a directory, a full disk: found before any episode
     perturbs = [p.strip() for p in args.perturb.split(",") if p.strip()] if args.perturb else None
     for name in perturbs or []:
         PerturbConfig(name=name)  # unknown names fail here, listing the valid ones

@@ -322,6 +322,12 @@ class DemoFile:
             except (OSError, ValueError, RuntimeError) as exc:
                 raise DatasetError(f"demo file {self.path}: reading /data/{name}/{key} failed ({exc}); "
                                    f"the file is truncated or corrupt") from exc
+            arr = out[key]
+            if arr.dtype.kind == "f" and not np.isfinite(arr).all():  # else training blames the learning rate
+                bad = np.argwhere(~np.isfinite(arr))[0]
+                raise DatasetError(f"demo file {self.path}: /data/{name}/{key} holds a non-finite value "
+                                   f"({arr[tuple(bad)]} at sample {int(bad[0])}); the demo is corrupt: "
+                                   f"re-collect it or drop it from the masks")
         return out
 
     def images(self, name: str) -> np.ndarray:
