@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from tcot_hybrid.data.dataset import (  # noqa: E402
     DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, VALID_EVERY, DemoFile, env_difference, image_key, is_valid_seed,
 )
+from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
@@ -63,8 +64,15 @@ def _quat_wxyz(xmat: np.ndarray) -> np.ndarray:
     return q
 
 
-def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress=None) -> DemoRecord:
-    """Run one episode of ``cfg`` and return its samples (see module doc). Raises on a crash."""
+def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress=None,
+                image_every: int = 1) -> DemoRecord:
+    """Run one episode of ``cfg`` and return its samples (see module doc). Raises on a crash.
+
+    ``image_every`` > 1 renders the planner image only at every k-th sample and the last one (rendering a
+    LIBERO scene costs 28-80 ms a frame, the rest of a sample microseconds): the other samples keep their
+    robot state and track (labels need the whole track) with a black frame, and ``obs/image_valid`` marks
+    the rendered ones. Loaders never train on a frame without an image."""
+    require_int("image_every", image_every, minimum=1)
     from tcot_hybrid.episode import EpisodeRunner
 
     t0 = time.perf_counter()
@@ -81,8 +89,9 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
             return
         tcp = sim.tcp_pos()
         uv, depth = cam.project(tcp[None])
+        rendered = len(rows) % image_every == 0
         rows.append({
-            "image": sim.render(camera, px, px),
+            "image": sim.render(camera, px, px) if rendered else None, "rendered": rendered,
             "q": sim.q, "qd": sim.qd, "eef_pos": tcp,
             "eef_quat": _quat_wxyz(sim.data.site_xmat[sim.ee_site]),
             "gripper_qpos": sim.data.qpos[sim.gripper_qpos].copy(),
@@ -96,6 +105,9 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     rec = runner.run(progress, steps_after_success=steps_after_success)
     if not steps_seen or steps_seen[-1] < runner.steps:  # the final state was not sampled (abort path)
         sample(runner, runner.steps)
+    if not rows[-1]["rendered"]:  # the last sample is the state the episode ended in: always render it
+        rows[-1]["image"], rows[-1]["rendered"] = sim.render(camera, px, px), True
+    blank = np.zeros((px, px, 3), np.uint8)
     n = len(rows)
     eef = np.array([r["eef_pos"] for r in rows], dtype=np.float32)
     grip = np.array([r["gripper_closed"] for r in rows], dtype=np.uint8)
@@ -105,7 +117,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     actions[:-1, 3] = grip[1:]
     actions[-1, 3] = grip[-1]  # the last sample holds: no motion, same gripper
     arrays = {
-        "obs/" + image_key(camera): np.stack([r["image"] for r in rows]).astype(np.uint8),
+        "obs/" + image_key(camera): np.stack([blank if r["image"] is None else r["image"] for r in rows]).astype(np.uint8),
         "obs/robot0_joint_pos": np.array([r["q"] for r in rows], dtype=np.float32),
         "obs/robot0_joint_vel": np.array([r["qd"] for r in rows], dtype=np.float32),
         "obs/robot0_eef_pos": eef,
@@ -117,6 +129,8 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         "task_success": succ,
         "actions": actions,
     }
+    if image_every > 1:
+        arrays["obs/image_valid"] = np.array([r["rendered"] for r in rows], dtype=np.uint8)
     hits = np.flatnonzero(succ)
     fired = [e["step"] for e in s.executor.events if e["kind"] == "perturbation"]
     # first plan made at or after the perturbation: from there on the track shows the recovery
@@ -141,10 +155,11 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     return DemoRecord(attrs=attrs, arrays=arrays, env_args=env_args, wall_s=time.perf_counter() - t0)
 
 
-def _worker(cfg):
+def _worker(job):
     """Pool entry point: never raises (a crash is reported back and that pair is retried next run)."""
+    cfg, image_every = job
     try:
-        return "ok", record_demo(cfg)
+        return "ok", record_demo(cfg, image_every=image_every)
     except Exception as exc:  # noqa: BLE001 - reported by the parent
         return "crash", (cfg.task, cfg.seed, f"{type(exc).__name__}: {exc}")
 
@@ -301,7 +316,7 @@ def _check_room(path: Path, rec, written: int) -> None:
 
 def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, workers: int = 2,
             valid_every: int = VALID_EVERY, compression: str = "gzip", progress: bool = True,
-            perturbs: list[str] | None = None) -> CollectSummary:
+            perturbs: list[str] | None = None, image_every: int = 1) -> CollectSummary:
     """Collect one episode per (task, seed, perturbation) not yet in ``out`` (resumable). ``perturbs``
     defaults to the base config's perturbation. Returns a summary."""
     from tqdm import tqdm
@@ -313,6 +328,7 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         raise ConfigError(f"valid_every must be >= 2 (every seed would be validation), got {valid_every}")
     if compression not in ("lzf", "gzip"):
         raise ConfigError(f"compression = {compression!r} is not valid; choose one of lzf, gzip")
+    require_int("image_every", image_every, minimum=1)
     t0 = time.perf_counter()
     h5 = _open_for_append(path)
     size0 = path.stat().st_size
@@ -332,10 +348,10 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         pool = None
         try:
             if workers == 1 or len(cfgs) <= 1:
-                results = map(_worker, cfgs)
+                results = map(_worker, [(c, image_every) for c in cfgs])
             else:
                 pool = mp.get_context("spawn").Pool(min(workers, len(cfgs)), maxtasksperchild=40)
-                results = pool.imap_unordered(_worker, cfgs, chunksize=1)
+                results = pool.imap_unordered(_worker, [(c, image_every) for c in cfgs], chunksize=1)
             with tqdm(total=len(pairs), initial=len(pairs) - len(todo), desc=f"collect {path.name}", unit="demo",
                       disable=not progress) as bar:
                 for status, payload in results:
@@ -407,6 +423,9 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"seed %% N == 0 goes to the validation mask (default {VALID_EVERY})")
     p.add_argument("--compression", default="gzip", choices=("lzf", "gzip"),
                    help="image compression (default gzip level 4: ~40%% smaller than lzf, same read speed)")
+    p.add_argument("--image-every", type=int, default=1,
+                   help="render the planner image only every N-th sample and the last (default 1: every sample); "
+                        "the others keep state and track, marked in obs/image_valid (LIBERO frames cost 28-80 ms)")
     p.add_argument("--config", type=Path, help="YAML/TOML/JSON RunConfig shared by every episode")
     p.add_argument("--out", type=Path, help="output file (default data/demos_<robot>.hdf5)")
     p.add_argument("--allow-eval-seeds", action="store_true",
@@ -457,6 +476,7 @@ def cmd_collect(argv: list[str]) -> int:
     for name in perturbs or []:
         PerturbConfig(name=name)  # unknown names fail here, listing the valid ones
     summary = collect(base, tasks=tasks, seeds=seeds, out=out, workers=args.workers, valid_every=args.valid_every,
+                      image_every=args.image_every,
                       compression=args.compression, progress=not args.quiet, perturbs=perturbs)
     print(summary.line())
     for task, seed, msg in summary.crashes:
