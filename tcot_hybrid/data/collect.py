@@ -34,7 +34,10 @@ from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
-TRAIN_SEED_LIMIT = 1000  # seeds >= this are evaluation seeds: never collect training data on them
+TRAIN_SEED_LIMIT = 1000  # workcell seeds >= this are evaluation seeds: never collect training data on them
+# LIBERO: sampled layouts 0-49999 are for training and tuning, 90000+ report (docs/seeds.md); the shipped init
+# states are the test set and are never collected.
+LIBERO_TRAIN_SEED_LIMIT = 50000
 GZIP_LEVEL = 4  # measured on 128x128 frames: 6.5 KB/frame vs 10.5 KB with lzf, same read speed
 
 
@@ -405,8 +408,9 @@ def _parser() -> argparse.ArgumentParser:
         "Re-running with the same --out keeps the demos already there and collects only missing "
         "(task, seed) pairs."))
     p.add_argument("--tasks", help="comma-separated task names (default: all tasks)")
-    p.add_argument("--suite", help="every task of this suite (instead of --tasks)")
-    p.add_argument("--robot", help="robot name (default: the config's, panda)")
+    p.add_argument("--suite", help="every task of these comma-separated suites (instead of --tasks); LIBERO "
+                                   "suites collect sampled layouts, never the shipped init states (the test set)")
+    p.add_argument("--robot", help="robot name (default: the tasks' own: panda, libero_panda on LIBERO)")
     p.add_argument("--controller", help="low-level controller (default: the config's)")
     p.add_argument("--ik", help="IK backend (default: the config's)")
     p.add_argument("--planner", default=None,
@@ -429,43 +433,54 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, help="YAML/TOML/JSON RunConfig shared by every episode")
     p.add_argument("--out", type=Path, help="output file (default data/demos_<robot>.hdf5)")
     p.add_argument("--allow-eval-seeds", action="store_true",
-                   help=f"allow seeds >= {TRAIN_SEED_LIMIT} (evaluation seeds; never train on them)")
+                   help=f"allow seeds >= {TRAIN_SEED_LIMIT} ({LIBERO_TRAIN_SEED_LIMIT} on LIBERO) (evaluation seeds; "
+                        "never train on them)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
 def cmd_collect(argv: list[str]) -> int:
     from tcot_hybrid.episode import validate_names
-    from tcot_hybrid.errors import unknown_name
     from tcot_hybrid.perturbations import PerturbConfig
     from tcot_hybrid.run_config import RunConfig, load_config_file
-    from tcot_hybrid.tasks import SUITES, list_tasks
+    from tcot_hybrid.tasks import default_robot, is_libero_task, list_tasks, suite_task_names
 
     args = _parser().parse_args(argv)
     base = load_config_file(args.config) if args.config else RunConfig()
-    over = {k: getattr(args, k) for k in ("robot", "controller", "ik", "planner", "checkpoint")
-            if getattr(args, k) is not None}
-    if args.mode is not None:
-        over["supervisor"] = dataclasses.replace(base.supervisor, mode=args.mode)
-    base = dataclasses.replace(base, **over)
     if args.suite and args.tasks:
         raise ConfigError("give --suite or --tasks, not both")
     all_tasks = list_tasks()
-    if args.suite is not None and args.suite not in SUITES:
-        raise ConfigError(unknown_name("suite", args.suite, SUITES))
     if args.suite:
-        tasks = [t.name for t in all_tasks if t.suite == args.suite]
+        tasks = [name for suite in args.suite.split(",") if suite.strip() for name in suite_task_names(suite.strip())]
     elif args.tasks:
         tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
     else:
         tasks = [t.name for t in all_tasks]
+    worlds = {is_libero_task(t) for t in tasks}
+    if len(worlds) > 1:
+        raise ConfigError("one demo file holds one robot and world: collect the workcell's and LIBERO's tasks into "
+                          "separate files (two runs)")
+    libero = worlds == {True}
+    over = {k: getattr(args, k) for k in ("robot", "controller", "ik", "planner", "checkpoint")
+            if getattr(args, k) is not None}
+    if "robot" not in over and base.robot == default_robot(base.task):  # robot auto: the tasks' own
+        over["robot"] = default_robot(tasks[0])
+    if args.mode is not None:
+        over["supervisor"] = dataclasses.replace(base.supervisor, mode=args.mode)
+    if libero:
+        if base.init == "shipped":
+            raise ConfigError("LIBERO's shipped init states are the test set (docs/seeds.md): training data uses "
+                              "sampled layouts (init: sampled)")
+        over["init"] = "sampled"
+    base = dataclasses.replace(base, **over)
     if args.episodes_per_task < 1 or args.seed_start < 0:
         raise ConfigError(f"--episodes-per-task must be >= 1 and --seed-start >= 0; got "
                           f"{args.episodes_per_task}, {args.seed_start}")
     seeds = list(range(args.seed_start, args.seed_start + args.episodes_per_task))
-    if seeds[-1] >= TRAIN_SEED_LIMIT and not args.allow_eval_seeds:
-        raise ConfigError(f"seeds {seeds[0]}..{seeds[-1]} reach the evaluation range (>= {TRAIN_SEED_LIMIT}); "
-                          f"training data must use seeds < {TRAIN_SEED_LIMIT} (--allow-eval-seeds to override)")
+    limit = LIBERO_TRAIN_SEED_LIMIT if libero else TRAIN_SEED_LIMIT
+    if seeds[-1] >= limit and not args.allow_eval_seeds:
+        raise ConfigError(f"seeds {seeds[0]}..{seeds[-1]} reach the evaluation range (>= {limit}); "
+                          f"training data must use seeds < {limit} (--allow-eval-seeds to override)")
     for t in tasks:
         validate_names(dataclasses.replace(base, task=t))
     out = args.out or Path("data") / f"demos_{base.robot}.hdf5"
