@@ -166,7 +166,16 @@ class LiberoTask(Task):
             self.scene.set_state(states[self.episode_seed % len(states)])
         else:
             self.scene.sample_layout(self.episode_seed)
+        self.world = world  # the oracle's skills read it (privileged); rebuilt per episode
         self._oracle = None
+
+    @property
+    def travel_z(self) -> float:
+        """[m, world] height the oracle planner lifts an open hand to after a release: 25 cm above the lowest
+        resting surface (LIBERO's tables are not at z = 0, and the living room's has no table_top site)."""
+        from tcot_hybrid.libero.oracle import TRAVEL_ABOVE_GROUND_M, ground_z
+
+        return ground_z(self) + TRAVEL_ABOVE_GROUND_M
 
     def success(self, world: World) -> bool:
         return self.scene.goal_reached()

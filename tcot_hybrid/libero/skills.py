@@ -1,0 +1,525 @@
+"""The LIBERO oracle's skills: pick-and-place onto/into anything, and moving an articulated joint (drawers,
+doors, knobs) to where a goal predicate holds. Keyframes come from privileged geometry (collision boxes,
+region sites, joint axes) read from MuJoCo, never from per-task tables.
+
+A script is a list of skills in one :class:`OracleContext`. The planner asks each not-yet-done skill for
+keyframes from the current world; a skill plans in the world as it *will be* once the earlier not-done
+skills have run (their :meth:`effect`: a joint at its goal value, an object at its place), so one global
+plan made at step 0 holds every step, and a local replan resumes wherever the episode is.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.errors import PlanningError
+from tcot_hybrid.libero.geometry import Boxes, collision_boxes, subtree_bodies
+from tcot_hybrid.libero.grasps import (
+    APPROACH_DZ,
+    E_Z,
+    R_DOWN,
+    FINGER_BELOW_TCP_M,
+    Grasp,
+    family,
+    frame,
+    hand_points,
+    rim_candidates,
+    rot_z,
+    score_grasps,
+    top_candidates,
+    top_down,
+)
+from tcot_hybrid.tasks.base import Keyframe, Skill, World
+
+ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
+TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
+RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
+LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
+
+
+def kf(p, closed: bool, rot=None) -> Keyframe:
+    return Keyframe(np.asarray(p, float).copy(), bool(closed), None if rot is None else np.asarray(rot, float))
+
+
+# --- the scene as the oracle sees it ------------------------------------------------------------------------
+
+@dataclass
+class Effect:
+    """What a skill changes: a joint's value or an object's origin (None: nothing predicted)."""
+
+    joint: int | None = None
+    q: float = 0.0
+    obj: str | None = None
+    pos: np.ndarray | None = None
+
+
+class OracleContext:
+    """Per-episode privileged scene knowledge: object and fixture body trees, obstacles, home pose."""
+
+    def __init__(self, task, world: World):
+        self.task, self.world = task, world
+        env = task.scene.env
+        self.env, self.model, self.data = env, world.model, world.data
+        m = self.model
+        self.bodies: dict[str, np.ndarray] = {}
+        self.category: dict[str, str] = {}
+        for name, obj in list(env.objects_dict.items()) + list(env.fixtures_dict.items()):
+            bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, obj.root_body)
+            if bid >= 0:
+                self.bodies[name] = subtree_bodies(m, bid)
+                self.category[name] = str(getattr(obj, "category_name", name))
+        robot = [b for b in range(m.nbody) if m.body(b).name.startswith(ROBOT_PREFIXES)]
+        self._robot = set(robot)
+        self.scene_bodies = np.array([b for b in range(1, m.nbody) if b not in self._robot], int)
+        self.home_tcp = world.tcp_pos()
+        self.home_rot = world.tcp_rot()
+        self.skills: list["LiberoSkill"] = []
+
+    # -- predictions -----------------------------------------------------------------------------------
+    def effects_before(self, skill: "LiberoSkill", world: World) -> list[Effect]:
+        out = []
+        for s in self.skills:
+            if s is skill:
+                break
+            if not s.done(world):
+                e = s.effect(world)
+                if e is not None:
+                    out.append(e)
+        return out
+
+    def boxes(self, bodies, effects: list[Effect]) -> Boxes:
+        """Collision boxes of ``bodies`` as they will be after ``effects``."""
+        bx = collision_boxes(self.model, self.data, bodies)
+        if not effects or len(bx) == 0:
+            return bx
+        centre, rot = bx.centre.copy(), bx.rot.copy()
+        body_of = self.model.geom_bodyid[bx.geom]
+        for e in effects:
+            R, anchor, t, moved = self._delta(e)
+            sel = np.isin(body_of, moved)
+            centre[sel] = (centre[sel] - anchor) @ R.T + anchor + t
+            rot[sel] = np.einsum("ij,njk->nik", R, rot[sel])
+        return Boxes(centre, rot, bx.half, bx.geom)
+
+    def point_after(self, point, body: int, effects: list[Effect]) -> np.ndarray:
+        p = np.asarray(point, float).copy()
+        for e in effects:
+            R, anchor, t, moved = self._delta(e)
+            if body in moved:
+                p = R @ (p - anchor) + anchor + t
+        return p
+
+    def rot_after(self, rot, body: int, effects: list[Effect]) -> np.ndarray:
+        r = np.asarray(rot, float).copy()
+        for e in effects:
+            R, _, _, moved = self._delta(e)
+            if body in moved:
+                r = R @ r
+        return r
+
+    def _delta(self, e: Effect):
+        m, d = self.model, self.data
+        if e.joint is not None:
+            j = e.joint
+            moved = subtree_bodies(m, int(m.jnt_bodyid[j]))
+            dq = e.q - float(d.qpos[m.jnt_qposadr[j]])
+            axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+                return np.eye(3), np.zeros(3), axis * dq, moved
+            return axis_angle(axis, dq), d.xanchor[j].copy(), np.zeros(3), moved
+        moved = self.bodies[e.obj]
+        return np.eye(3), np.zeros(3), e.pos - self.world.pos(e.obj), moved
+
+    def obstacles(self, effects: list[Effect], *, exclude: tuple[str, ...] = ()) -> Boxes:
+        """Every scene collision box (no robot, no world body such as the floor), after ``effects``."""
+        skip = set()
+        for name in exclude:
+            skip.update(int(b) for b in self.bodies[name])
+        bodies = [b for b in self.scene_bodies if b not in skip]
+        return self.boxes(bodies, effects)
+
+    def object_boxes(self, name: str, effects: list[Effect]) -> Boxes:
+        return self.boxes(self.bodies[name], effects)
+
+    def ground_z(self) -> float:
+        """Lowest resting surface: no hand point may go below it."""
+        lows = [self.object_boxes(n, []).aabb()[0][2] for n in self.task.scene.env.objects_dict
+                if n in self.bodies and len(self.object_boxes(n, [])) > 0]
+        return min(lows) - 0.002 if lows else 0.0
+
+    def clear_z(self, a_xy, b_xy, obstacles: Boxes, radius: float) -> float:
+        """Height of the highest obstacle top within ``radius`` of the segment a->b (xy)."""
+        if len(obstacles) == 0:
+            return -np.inf
+        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        lo, hi = obstacles.centre - ext, obstacles.centre + ext
+        a, b = np.asarray(a_xy[:2], float), np.asarray(b_xy[:2], float)
+        ts = np.linspace(0, 1, 25)
+        pts = a + (b - a) * ts[:, None]
+        near = np.zeros(len(lo), bool)
+        for p in pts:
+            dx = np.maximum(np.maximum(lo[:, 0] - p[0], p[0] - hi[:, 0]), 0)
+            dy = np.maximum(np.maximum(lo[:, 1] - p[1], p[1] - hi[:, 1]), 0)
+            near |= np.hypot(dx, dy) <= radius
+        return float(hi[near, 2].max()) if near.any() else -np.inf
+
+
+def axis_angle(axis, angle: float) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+# --- skills -------------------------------------------------------------------------------------------------
+
+class LiberoSkill(Skill):
+    ctx: OracleContext
+    predicate: list
+
+    def done(self, world: World) -> bool:
+        return bool(self.ctx.env._eval_predicate(self.predicate))
+
+    def keyframes(self, world: World) -> list[Keyframe]:
+        """The skill's keyframes; when an earlier step is still ahead (planning the whole script at once),
+        the hand first returns to its home pose so every step starts from the same posture."""
+        kfs = self._keyframes(world)
+        if self.ctx.effects_before(self, world):
+            kfs.insert(0, kf(self.ctx.home_tcp, False, self.ctx.home_rot))
+        return kfs
+
+    def effect(self, world: World) -> Effect | None:
+        return None
+
+
+@dataclass
+class Destination:
+    """Where a pick-and-place puts its object: on another object, on a region site, or in a region site."""
+
+    relation: str  # "on" | "in"
+    target: str  # object name or region site name
+    is_site: bool
+    slot: int = 0  # several objects to one destination: slot k of n (spread apart)
+    slots: int = 1
+
+
+class PickPlace(LiberoSkill):
+    """Grasp ``obj`` (rim pinch or top grasp from its geometry), carry it above the obstacles, lower it onto
+    or into the destination until the hand or the object would touch anything, release, lift."""
+
+    def __init__(self, ctx: OracleContext, obj: str, dest: Destination, predicate: list):
+        self.ctx, self.obj, self.dest, self.predicate = ctx, obj, dest, predicate
+        self.target = dest.target
+        self._place: np.ndarray | None = None
+
+    def done(self, world: World) -> bool:
+        return super().done(world) and not world.is_held(self.obj)
+
+    def effect(self, world: World) -> Effect | None:
+        plan = self._plan(world)
+        return Effect(obj=self.obj, pos=plan["obj_at_release"] - np.array([0, 0, RELEASE_GAP_M]))
+
+    # ---------------------------------------------------------------------------------------------------
+    def grasp(self, world: World, effects: list[Effect]) -> Grasp:
+        ctx = self.ctx
+        obj = ctx.object_boxes(self.obj, effects)
+        kind = family(ctx.category.get(self.obj, self.obj))
+        cands = rim_candidates(obj) if kind == "rim" else top_candidates(obj)
+        if kind == "rim" and not cands:
+            kind, cands = "top", top_candidates(obj)
+        if not cands:
+            raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
+                                f"no rim and no top slab narrower than the open hand")
+        obstacles = ctx.obstacles(effects, exclude=(self.obj,))
+        base = ctx.home_tcp
+
+        def prefer(pos, rot):  # mild preference for grasps nearer the robot (reach, wrist)
+            return 0.5 * float(np.linalg.norm(pos[:2] - base[:2]))
+
+        graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer)
+        return graded[0]
+
+    def _plan(self, world: World) -> dict:
+        ctx = self.ctx
+        effects = ctx.effects_before(self, world)
+        held = world.is_held(self.obj)
+        obj_pos = world.pos(self.obj) if not effects else ctx.point_after(
+            world.pos(self.obj), int(ctx.bodies[self.obj][0]), effects)
+        if held:
+            g_pos, g_rot = world.tcp_pos(), world.tcp_rot()
+        else:
+            g = self.grasp(world, effects)
+            g_pos, g_rot = g.pos, g.rot
+        obj_boxes = ctx.object_boxes(self.obj, effects)
+        # the object in the hand's frame (rigid while held)
+        rel_c = (obj_boxes.centre - g_pos) @ g_rot
+        rel_R = np.einsum("ji,njk->nik", g_rot, obj_boxes.rot)
+        rel_origin = g_rot.T @ (obj_pos - g_pos)
+        obstacles = ctx.obstacles(effects, exclude=(self.obj,))
+        start = world.tcp_pos() if held else g_pos
+        best = None
+        for place_xy, yaw in self._place_candidates(world, effects, obj_boxes, obj_pos):
+            R_place = rot_z(yaw) @ g_rot
+            tcp_xy = place_xy - (R_place @ rel_origin)[:2]
+
+            def carried(tcp, R_place=R_place) -> Boxes:
+                return Boxes(tcp + rel_c @ R_place.T, np.einsum("ij,njk->nik", R_place, rel_R), obj_boxes.half,
+                             obj_boxes.geom)
+
+            probe = carried(np.array([tcp_xy[0], tcp_xy[1], 0.0]))
+            lo, hi = probe.aabb()
+            near = _near(obstacles, lo - 0.12, hi + 0.12)
+            support = self._support_z(near, lo, hi)
+            z_min = support + RELEASE_GAP_M - lo[2]
+            top = ctx.clear_z(start, tcp_xy, obstacles, radius=0.08)
+            carry_z = max(top + TRAVEL_CLEARANCE_M - lo[2], start[2] + LIFT_M, z_min + 0.06)
+            z = carry_z
+            step = 0.01
+            while z - step >= z_min - 1e-9:
+                tcp = np.array([tcp_xy[0], tcp_xy[1], z - step])
+                if near.contains(hand_points(tcp, R_place, closed=True), margin=0.003).any() or \
+                        self._boxes_hit(carried(tcp), near):
+                    break
+                z -= step
+            if z - z_min > 0.03 and step > 0.005:
+                pass
+            key = (round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
+            if best is None or key < best[0]:
+                best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
+                                  carry_z=carry_z, obj_below_tcp=float(-lo[2])))
+        out = best[1]
+        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles,
+                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
+        return out
+
+    @staticmethod
+    def _boxes_hit(body: Boxes, obstacles: Boxes) -> bool:
+        """Conservative box-vs-box test: each carried box's corners and centre against the obstacles."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)] + [[0, 0, 0]], float)
+        pts = body.centre[:, None, :] + np.einsum("nij,nkj->nki", body.rot, signs[None] * body.half[:, None, :])
+        return bool(obstacles.contains(pts.reshape(-1, 3), margin=0.002).any())
+
+    def _support_z(self, obstacles: Boxes, lo, hi) -> float:
+        """Top of the highest obstacle box under the footprint [lo, hi] (xy) whose top is below the
+        destination's reference height (a region's top, an object's top)."""
+        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        blo, bhi = obstacles.centre - ext, obstacles.centre + ext
+        over = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
+        ref = self._reference_top()
+        cand = over & (bhi[:, 2] <= ref + 1e-6)
+        if cand.any():
+            return float(bhi[cand, 2].max())
+        return self.ctx.ground_z()
+
+    def _reference_top(self) -> float:
+        ctx, d = self.ctx, self.dest
+        if d.is_site:
+            sid = ctx.model.site(d.target).id
+            effects = ctx.effects_before(self, ctx.world)
+            pos = ctx.point_after(ctx.data.site_xpos[sid], int(ctx.model.site_bodyid[sid]), effects)
+            size = ctx.model.site_size[sid]
+            if d.relation == "in":
+                return float(pos[2] - size[2] + 0.02)
+            return float(pos[2] + size[2] + 0.10)
+        effects = ctx.effects_before(self, ctx.world)
+        return float(ctx.object_boxes(d.target, effects).aabb()[1][2] + 0.005)
+
+    def _region(self, world, effects):
+        """Destination frame: centre (3,), rotation, xy half size, and whether it is a region site."""
+        ctx, d = self.ctx, self.dest
+        if d.is_site:
+            sid = ctx.model.site(d.target).id
+            bid = int(ctx.model.site_bodyid[sid])
+            centre = ctx.point_after(ctx.data.site_xpos[sid], bid, effects)
+            R = ctx.rot_after(ctx.data.site_xmat[sid].reshape(3, 3), bid, effects)
+            return centre, R, ctx.model.site_size[sid][:2].copy()
+        centre = ctx.point_after(world.pos(d.target), int(ctx.bodies[d.target][0]), effects)
+        return centre, np.eye(3), np.array([0.012, 0.012])
+
+    def _centre_xy(self, world, effects) -> np.ndarray:
+        centre, R, half = self._region(world, effects)
+        return centre[:2] + R[:2, :2] @ self._slot_offset(half)
+
+    def _slot_offset(self, half) -> np.ndarray:
+        d = self.dest
+        offset = np.zeros(2)
+        if d.slots > 1:  # spread several objects along the region's longer axis
+            axis = 0 if half[0] >= half[1] else 1
+            span = half[axis] * 0.9
+            offset[axis] = -span + 2 * span * (d.slot + 0.5) / d.slots
+        return offset
+
+    def _place_candidates(self, world, effects, obj_boxes: Boxes, obj_pos):
+        """(object origin xy, hand yaw change) candidates: the region's centre (or this object's slot in it)
+        and, inside a region, a grid of offsets; the yaw is the one that best fits the footprint in the
+        region (books into narrow slots)."""
+        centre, R, half = self._region(world, effects)
+        best, best_yaw = -np.inf, 0.0
+        for yaw in np.deg2rad([0, 15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90]):
+            Rz = rot_z(yaw)
+            b = Boxes((obj_boxes.centre - obj_pos) @ Rz.T, np.einsum("ij,njk->nik", Rz, obj_boxes.rot),
+                      obj_boxes.half, obj_boxes.geom)
+            lo, hi = b.extents_in(R, np.zeros(3))
+            slack = float(np.min(np.concatenate([half - hi[:2], half + lo[:2]]))) if self.dest.is_site else 0.0
+            fit = min(slack, 0.01) - 0.002 * abs(yaw)
+            if fit > best + 1e-9:
+                best, best_yaw = fit, yaw
+        base = self._slot_offset(half)
+        offsets = [base]
+        if self.dest.slots == 1:
+            for fx in (-0.6, 0.0, 0.6):
+                for fy in (-0.6, 0.0, 0.6):
+                    if fx or fy:
+                        offsets.append(np.array([fx * half[0], fy * half[1]]))
+        for off in offsets:
+            yield centre[:2] + R[:2, :2] @ off, best_yaw
+
+    def _keyframes(self, world: World) -> list[Keyframe]:
+        ctx = self.ctx
+        p = self._plan(world)
+        obstacles = p["obstacles"]
+        kfs: list[Keyframe] = []
+        g_pos, g_rot = p["grasp_pos"], p["grasp_rot"]
+        release, R_place = p["release"], p["release_rot"]
+        if not p["held"]:
+            pre = g_pos + np.array([0, 0, APPROACH_DZ])
+            kfs += [kf(pre, False, g_rot), kf(g_pos + np.array([0, 0, 0.02]), False, g_rot), kf(g_pos, False, g_rot),
+                    kf(g_pos, True, g_rot)]
+        start = world.tcp_pos() if p["held"] else g_pos
+        carry_z = p["carry_z"]
+        kfs += [kf([start[0], start[1], carry_z], True, g_rot if not p["held"] else world.tcp_rot()),
+                kf([release[0], release[1], carry_z], True, R_place),
+                kf(release + np.array([0, 0, 0.03]), True, R_place),
+                kf(release, True, R_place),
+                kf(release, False, R_place)]
+        up = max(release[2] + LIFT_M, carry_z)
+        kfs.append(kf([release[0], release[1], up], False, R_place))
+        return kfs
+
+
+class MoveJoint(LiberoSkill):
+    """Move an articulated joint (drawer slide, door hinge, knob) until a goal predicate holds: grasp the
+    part's handle and carry it along the joint's path (slides: straight; hinges: an arc about the axis)."""
+
+    def __init__(self, ctx: OracleContext, name: str, joint: int, q_goal: float, q_push: float, predicate: list):
+        self.ctx, self.obj, self.joint, self.predicate = ctx, name, joint, predicate
+        self.q_goal, self.q_push = q_goal, q_push
+        self.target = None
+
+    def effect(self, world: World) -> Effect | None:
+        return Effect(joint=self.joint, q=self.q_goal)
+
+    def _keyframes(self, world: World) -> list[Keyframe]:
+        ctx = self.ctx
+        m, d = ctx.model, ctx.data
+        effects = ctx.effects_before(self, world)
+        j = self.joint
+        body = int(m.jnt_bodyid[j])
+        q_now = float(d.qpos[m.jnt_qposadr[j]])
+        for e in effects:
+            if e.joint == j:
+                q_now = e.q
+        moving = ctx.boxes([body], effects)
+        axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
+        anchor = d.xanchor[j].copy()
+        if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+            return self._slide(world, moving, axis, q_now, effects)
+        return self._hinge(world, moving, axis, anchor, q_now, effects)
+
+    # -- drawers ----------------------------------------------------------------------------------------
+    def _slide(self, world, moving: Boxes, axis, q_now, effects) -> list[Keyframe]:
+        """Pinch the handle bar horizontally (fingers above and below it), then move along the axis."""
+        ctx = self.ctx
+        lo, hi = moving.aabb()
+        # the handle: the box that sticks out furthest towards the pull direction (-axis when opening is -q)
+        pull = -axis  # direction the part moves as q decreases
+        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        front = (moving.centre @ pull) + np.abs(ext @ np.abs(pull))
+        i = int(np.argmax(front))
+        handle_c = moving.centre[i].copy()
+        handle_front = moving.centre[i] + pull * (np.abs(moving.rot[i]) @ moving.half[i]) @ np.abs(pull)
+        approach = -pull  # the hand approaches against the pull direction (into the cabinet)
+        approach_h = approach - E_Z * (approach @ E_Z)
+        approach_h /= np.linalg.norm(approach_h)
+        rot = frame(approach_h, E_Z)  # fingers close vertically on the horizontal bar
+        grip = handle_c.copy()
+        dq = self.q_push - q_now  # along +axis per unit q
+        end = grip + axis * dq
+        back = grip - approach_h * 0.10
+        kfs = [kf(back + np.array([0, 0, 0.0]), False, rot), kf(grip - approach_h * 0.02, False, rot),
+               kf(grip, False, rot), kf(grip, True, rot)]
+        n = max(2, int(np.ceil(abs(dq) / 0.03)))
+        for k in range(1, n + 1):
+            kfs.append(kf(grip + axis * dq * k / n, True, rot))
+        kfs += [kf(end, False, rot), kf(end - approach_h * 0.10, False, rot)]
+        del handle_front, lo, hi
+        return kfs
+
+    # -- hinges: knobs (vertical axis, grasp the bar) and doors (push the leaf along its arc) ---------
+    def _hinge(self, world, moving: Boxes, axis, anchor, q_now, effects) -> list[Keyframe]:
+        ctx = self.ctx
+        lo, hi = moving.aabb()
+        if abs(axis @ E_Z) < 0.9:
+            raise PlanningError(f"oracle: hinge {ctx.model.joint(self.joint).name!r} has a non-vertical axis "
+                                f"{np.round(axis, 3).tolist()}; only vertical hinges (knobs, doors) are supported")
+        sign = 1.0 if axis @ E_Z > 0 else -1.0
+        dq = self.q_push - q_now
+        radius = np.linalg.norm((hi[:2] + lo[:2]) / 2 - anchor[:2]) if len(moving) else 0.0
+        extent = float(np.max(np.linalg.norm(np.stack([lo[:2], hi[:2]]) - anchor[:2], axis=1)))
+        if extent < 0.08:  # a knob: grasp its top bar, turn the hand about the axis
+            return self._knob(moving, anchor, sign * dq)
+        return self._door(moving, anchor, sign * dq)
+
+    def _knob(self, moving: Boxes, anchor, turn) -> list[Keyframe]:
+        cands = top_candidates(moving)
+        obstacles = self.ctx.obstacles([], exclude=())
+        mask = ~np.isin(obstacles.geom, moving.geom)
+        graded = score_grasps(cands, obstacles.select(mask), ground_z=self.ctx.ground_z(), kind="knob")
+        g = graded[0]
+        kfs = [kf(g.pos + np.array([0, 0, APPROACH_DZ]), False, g.rot), kf(g.pos, False, g.rot),
+               kf(g.pos, True, g.rot)]
+        n = max(2, int(np.ceil(abs(turn) / 0.25)))
+        for k in range(1, n + 1):
+            Rk = rot_z(turn * k / n)
+            p = anchor + Rk @ (g.pos - anchor)
+            p[2] = g.pos[2]
+            kfs.append(kf(p, True, Rk @ g.rot))
+        Rk = rot_z(turn)
+        p = anchor + Rk @ (g.pos - anchor)
+        p[2] = g.pos[2]
+        kfs += [kf(p, False, Rk @ g.rot), kf(p + np.array([0, 0, APPROACH_DZ]), False, Rk @ g.rot)]
+        return kfs
+
+    def _door(self, moving: Boxes, anchor, turn) -> list[Keyframe]:
+        """Push the leaf with the closed fingertips along its arc, on the side it moves towards."""
+        lo, hi = moving.aabb()
+        # the leaf's far edge (from the hinge) at 80 % of its length, 2.5 cm below its top
+        far = moving.centre[np.argmax(np.linalg.norm(moving.centre[:, :2] - anchor[:2], axis=1))]
+        r_vec = far[:2] - anchor[:2]
+        length = np.linalg.norm(r_vec)
+        u = r_vec / length
+        normal = np.array([-u[1], u[0]]) * np.sign(turn)  # direction the leaf moves at that point
+        thickness = 0.02
+        p0 = np.array([*(anchor[:2] + u * 0.8 * length - normal * (thickness + 0.012)), hi[2] - 0.025])
+        rot0 = top_down(u)
+        kfs = [kf(p0 + np.array([0, 0, APPROACH_DZ]), True, rot0), kf(p0, True, rot0)]
+        n = max(3, int(np.ceil(abs(turn) / 0.15)))
+        for k in range(1, n + 1):
+            Rk = rot_z(turn * k / n)
+            p = anchor + Rk @ (p0 - anchor)
+            p[2] = p0[2]
+            kfs.append(kf(p, True, Rk @ rot0))
+        last = kfs[-1]
+        kfs.append(kf(last.pos - np.append(rot_z(turn)[:2, :2] @ normal, 0.0) * 0.05, True, last.rot))
+        kfs.append(kf(kfs[-1].pos + np.array([0, 0, 0.08]), True, last.rot))
+        del lo
+        return kfs
+
+
+def _near(boxes: Boxes, lo, hi) -> Boxes:
+    """The boxes whose xy bounds overlap [lo, hi] (xy)."""
+    ext = np.einsum("nij,nj->ni", np.abs(boxes.rot), boxes.half)
+    blo, bhi = boxes.centre - ext, boxes.centre + ext
+    keep = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
+    return boxes.select(keep)
