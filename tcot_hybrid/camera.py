@@ -254,6 +254,28 @@ def _depths(depth_m: object, n: int, *, error: type[Exception] = LiftError) -> n
     return depth
 
 
+def _ray_plane(camera: CameraModel, uv: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The one ray-plane intersection: for pixels ``uv`` (N, 2) and plane heights ``z`` (N,), the world
+    displacement per unit of optical-axis depth along each pixel's ray (N, 3) and the depth at which the ray
+    meets its plane (N,) (inf/NaN for rays parallel to the plane; <= 0 for a plane behind the camera)."""
+    rays_cv = np.c_[uv, np.ones(len(uv))] @ camera._K_inv.T  # type: ignore[attr-defined]  # OpenCV z = 1
+    d_world = rays_cv @ camera.T_world_cam[:3, :3].T  # world displacement per unit of optical-axis depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = (z - camera.T_world_cam[2, 3]) / d_world[:, 2]
+    return d_world, depth
+
+
+def points_at_height(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray) -> np.ndarray:
+    """World points [m] where the viewing rays of pixels ``uv_px`` (..., 2) meet the planes z = ``z_m`` (...);
+    NaN where the plane is not in front of the camera. The unchecked, batched form of
+    :func:`depth_at_height` for offline metrics (training validation, held-out reports)."""
+    shape = np.shape(uv_px)[:-1]
+    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
+    d_world, depth = _ray_plane(camera, uv, np.asarray(z_m, dtype=float).reshape(-1))
+    depth[~(depth > 0)] = np.nan
+    return (camera.T_world_cam[:3, 3] + d_world * depth[:, None]).reshape(*shape, 3)
+
+
 def depth_at_height(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, *, min_cos: float = 1e-3) -> np.ndarray:
     """Depth along the optical axis [m] at which each pixel's viewing ray meets the plane world z = ``z_m``.
 
@@ -264,17 +286,13 @@ def depth_at_height(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, *, 
     """
     uv = as_points("uv_px", uv_px, 2)
     z = _depths(z_m, uv.shape[0])  # same shape/finiteness checks as a depth array
-    rays_cv = np.c_[uv, np.ones(len(uv))] @ camera._K_inv.T  # type: ignore[attr-defined]  # OpenCV z = 1
-    R, c = camera.T_world_cam[:3, :3], camera.T_world_cam[:3, 3]
-    d_world = rays_cv @ R.T  # world displacement per unit of optical-axis depth
-    dz = d_world[:, 2]
+    d_world, depth = _ray_plane(camera, uv, z)
     norm = np.linalg.norm(d_world, axis=1)
-    bad = np.flatnonzero(np.abs(dz) < min_cos * norm)
+    bad = np.flatnonzero(np.abs(d_world[:, 2]) < min_cos * norm)
     if bad.size:
         i = int(bad[0])
         raise LiftError(f"waypoint {i}: the ray through uv_px={uv[i].tolist()} is parallel to the plane "
                         f"z = {z[i]} m; no depth for a height cue")
-    depth = (z - c[2]) / dz
     bad = np.flatnonzero(~(depth > 0))
     if bad.size:
         i = int(bad[0])

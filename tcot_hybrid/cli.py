@@ -31,10 +31,10 @@ def listing() -> dict:
     from tcot_hybrid.perturbations import list_perturbations
     from tcot_hybrid.planners import list_planners
     from tcot_hybrid.robot import list_robots
-    from tcot_hybrid.tasks import list_tasks
+    from tcot_hybrid.tasks import list_all_tasks
 
     return {
-        "tasks": [{"name": t.name, "suite": t.suite, "instruction": t.instruction} for t in list_tasks()],
+        "tasks": list_all_tasks(),  # the workcell's, then every suite the installed LIBERO registers
         "robots": list_robots(),
         "controllers": list_controllers(),
         "ik": list_ik(),
@@ -59,6 +59,10 @@ def cmd_list(argv: list[str]) -> int:
         print(f"  {suite}:")
         for t in tasks:
             print(f"    {t['name']:<34} {t['instruction']}")
+    from tcot_hybrid.libero import libero_available
+
+    if not libero_available():
+        print("  (LIBERO's suites appear here once LIBERO is installed: `make libero`)")
     for key in ("robots", "controllers", "ik", "planners"):
         print(f"{key}: {', '.join(data[key])}")
     print("perturbations:")
@@ -100,7 +104,17 @@ def parse_with_config(command_cls, argv: list[str], prog: str):
     pre.add_argument("--config", type=Path)
     known, _ = pre.parse_known_args(argv)
     base = load_config_file(known.config) if known.config is not None else RunConfig()
-    return tyro.cli(command_cls, args=argv, default=command_cls(cfg=base, config=known.config), prog=prog)
+    cmd = tyro.cli(command_cls, args=argv, default=command_cls(cfg=base, config=known.config), prog=prog)
+    if not robot_given(argv, base):  # robot "auto": the robot of the task actually chosen (--task may change it)
+        cmd = dataclasses.replace(cmd, cfg=dataclasses.replace(cmd.cfg, robot="auto"))
+    return cmd
+
+
+def robot_given(argv: list[str], base: RunConfig) -> bool:
+    """Did the user name a robot (``--robot`` or a config file's robot other than its task's own)?"""
+    from tcot_hybrid.tasks import default_robot
+
+    return any(a == "--robot" or a.startswith("--robot=") for a in argv) or base.robot != default_robot(base.task)
 
 
 def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
@@ -206,7 +220,7 @@ class EvalCommand:
     config: Path | None = None
     """YAML/TOML/JSON file with RunConfig fields shared by every episode."""
     suite: str | None = None
-    """Evaluate every task of this suite (default: all suites)."""
+    """Evaluate every task of this suite (default: the workcell's suites); LIBERO suites too, e.g. libero_10."""
     tasks: str | None = None
     """Comma-separated task names (instead of --suite)."""
     planners: str | None = None
@@ -216,7 +230,7 @@ class EvalCommand:
     perturb: str | None = None
     """Comma-separated perturbations to inject (default: --perturb.name, i.e. none); `tcot list` shows them."""
     robots: str | None = None
-    """Comma-separated robots (default: --robot)."""
+    """Comma-separated robots (default: --robot, else each task's own robot)."""
     controllers: str | None = None
     """Comma-separated controllers (default: --controller)."""
     iks: str | None = None
@@ -243,23 +257,22 @@ def _split(value: str | None, default: str) -> list[str]:
 
 def cmd_eval(argv: list[str]) -> int:
     from tcot_hybrid.episode import validate_names
-    from tcot_hybrid.errors import ConfigError, unknown_name
+    from tcot_hybrid.errors import ConfigError
     from tcot_hybrid.evaluation import evaluate, make_jobs
-    from tcot_hybrid.tasks import SUITES, list_tasks
+    from tcot_hybrid.tasks import list_tasks, suite_task_names
 
     cmd = parse_with_config(EvalCommand, argv, "tcot eval")
     if cmd.suite and cmd.tasks:
         raise ConfigError("give --suite or --tasks, not both")
     all_tasks = list_tasks()
-    if cmd.suite is not None and cmd.suite not in SUITES:
-        raise ConfigError(unknown_name("suite", cmd.suite, SUITES))
-    tasks = ([t.name for t in all_tasks if t.suite == cmd.suite] if cmd.suite else
+    tasks = (suite_task_names(cmd.suite) if cmd.suite else
              _split(cmd.tasks, ",".join(t.name for t in all_tasks)))
     if cmd.episodes < 1 or cmd.workers < 1 or cmd.seed_start < 0:
         raise ConfigError(f"--episodes and --workers must be >= 1 and --seed-start >= 0; got "
                           f"{cmd.episodes}, {cmd.workers}, {cmd.seed_start}")
     jobs = make_jobs(cmd.cfg, tasks=tasks, planners=_split(cmd.planners, cmd.cfg.planner),
-                     modes=_split(cmd.modes, "global"), robots=_split(cmd.robots, cmd.cfg.robot),
+                     modes=_split(cmd.modes, "global"), robots=_split(cmd.robots, cmd.cfg.robot if robot_given(
+                         argv, load_config_file(cmd.config) if cmd.config else RunConfig()) else "auto"),
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
                      episodes=cmd.episodes, seed_start=cmd.seed_start,
                      perturbs=_split(cmd.perturb, cmd.cfg.perturb.name), sweep=cmd.sweep)
@@ -271,7 +284,7 @@ def cmd_eval(argv: list[str]) -> int:
             validate_names(j.cfg)
     result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
     if cmd.readme:
-        from tcot_hybrid.bench import update_readme_section
+        from tcot_hybrid.markdown import update_readme_section
         from tcot_hybrid.evaluation import markdown
 
         summary = (f"Measured by `tcot eval {' '.join(argv)}` ({result['episodes']} episodes; all cells in "
@@ -286,7 +299,8 @@ def cmd_eval(argv: list[str]) -> int:
 # --- tcot bench ---------------------------------------------------------------------------------------
 
 def cmd_bench(argv: list[str]) -> int:
-    from tcot_hybrid.bench import markdown, run_bench, update_readme_section
+    from tcot_hybrid.bench import run_bench
+    from tcot_hybrid.markdown import bench_markdown, update_readme_section
 
     p = argparse.ArgumentParser(prog="tcot bench", description="speed and memory figures (medians with spread, "
                                 "ratios measured in the same run); writes DIR/bench.json and DIR/bench.md")
@@ -302,7 +316,7 @@ def cmd_bench(argv: list[str]) -> int:
     command = "tcot bench " + " ".join(argv)
     result = run_bench(args.out, quick=args.quick, robot=args.robot, command=command.strip())
     if args.readme:
-        update_readme_section(args.readme, "bench", markdown(result))
+        update_readme_section(args.readme, "bench", bench_markdown(result))
     for k, v in result["ratios"].items():
         print(f"{k}: {v}")
     print(f"-> {args.out / 'bench.json'}")
@@ -313,7 +327,7 @@ COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_ben
 COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromlist=["_"]).cmd_collect(argv)
 COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
 COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist=["_"]).cmd_replay(argv)
-COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train", fromlist=["_"]).cmd_train(argv)
+COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train_cli", fromlist=["_"]).cmd_train(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

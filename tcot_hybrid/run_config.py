@@ -10,15 +10,13 @@ import dataclasses
 import hashlib
 import json
 import tomllib
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from tcot_hybrid.config import TimingConfig, require_int
+from tcot_hybrid.config import TimingConfig, from_mapping, require_int
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.executor import ExecutorConfig
 from tcot_hybrid.ik import IKConfig
@@ -88,60 +86,6 @@ class RunConfig:
 
 
 # --- loading stored configs ---------------------------------------------------------------------------
-
-def _coerce(path: str, tp: Any, value: Any) -> Any:
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        return from_mapping(tp, value, prefix=path)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        inner = [a for a in args if a is not type(None)]
-        return _coerce(path, inner[0], value)
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise ConfigError(f"{path} must be a mapping, got {value!r}")
-        _, vt = typing.get_args(tp)
-        return {str(k): _coerce(f"{path}.{k}", vt, v) for k, v in value.items()}
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{path} must be a number, got {value!r} ({type(value).__name__})")
-        try:
-            return float(value)
-        except OverflowError as exc:  # an integer beyond float range, e.g. 10**400 in YAML
-            raise ConfigError(f"{path} must be a finite number, got a {value.bit_length()}-bit integer") from exc
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{path} must be an integer, got {value!r} ({type(value).__name__})")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{path} must be true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{path} must be a string, got {value!r} ({type(value).__name__})")
-        return value
-    return value
-
-
-def from_mapping(cls, data: Any, *, prefix: str = ""):
-    """Build dataclass ``cls`` from a plain mapping, naming any unknown key or wrongly typed value."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{prefix or cls.__name__} must be a mapping, got {data!r}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - fields)
-    if unknown:
-        where = prefix or "config"
-        raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {', '.join(sorted(fields))}")
-    kwargs = {k: _coerce(f"{prefix}.{k}" if prefix else k, hints[k], v) for k, v in data.items()}
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:
-        raise ConfigError(f"{prefix or cls.__name__}: {exc}") from exc
-
 
 def load_config_file(path: str | Path) -> RunConfig:
     """Load a RunConfig from .yaml/.yml/.toml/.json; errors name the file and the field."""

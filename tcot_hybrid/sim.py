@@ -66,7 +66,9 @@ class Simulation:
         finger_bodies = [int(m.jnt_bodyid[m.joint(j).id]) for j in robot.gripper_joints]
         finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if _in_subtree(m, int(m.geom_bodyid[g]), b))
                              for b in finger_bodies)  # a finger's pads may sit in child bodies (robosuite)
-        self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms)
+        self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms,
+                           gripper=tuple((int(a), sign * robot.gripper_open, sign * robot.gripper_closed)
+                                         for a, sign in zip(self._grip_acts, self._grip_sign)))
         self.ee_site = m.site(robot.ee_site).id
         self.T_world_base = base_transform(robot, m, self.data)
         self.T_base_world = np.linalg.inv(self.T_world_base)
@@ -186,6 +188,7 @@ class Simulation:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+        self.task.release_scene()
 
 
 def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:

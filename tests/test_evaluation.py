@@ -88,7 +88,7 @@ def test_job_key_follows_the_checkpoint_file(tmp_path):
 
 def test_job_key_follows_the_task_code(monkeypatch):
     """An episode run with other task code (e.g. a changed oracle script) must not be credited on resume."""
-    from tcot_hybrid import evaluation
+    from tcot_hybrid.evaluation import jobs as evaluation
 
     (job,) = make_jobs(RunConfig(), tasks=["tool_pull_cube_with_stick"], planners=["oracle"], modes=["global"],
                        robots=["panda"], controllers=["computed_torque"], iks=["mink"], episodes=1, seed_start=1000)

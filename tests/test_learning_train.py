@@ -19,17 +19,12 @@ from tcot_hybrid.learning.checkpoint import load_checkpoint  # noqa: E402
 from tcot_hybrid.learning.data import instructions_of, load_frames  # noqa: E402
 from tcot_hybrid.data.labels import TrajectoryWindowConfig, windows_from_meta  # noqa: E402
 from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
-from tcot_hybrid.learning.train import (  # noqa: E402
-    Batcher,
-    MixConfig,
-    TrainConfig,
-    auroc,
-    cmd_train,
-    lift_points,
-    load_train_config,
-    steps_to_success,
-    train,
-)
+from tcot_hybrid.camera import points_at_height  # noqa: E402
+from tcot_hybrid.learning.batches import Batcher, steps_to_success  # noqa: E402
+from tcot_hybrid.learning.train import train  # noqa: E402
+from tcot_hybrid.learning.train_cli import cmd_train  # noqa: E402
+from tcot_hybrid.learning.train_config import MixConfig, TrainConfig, load_train_config  # noqa: E402
+from tcot_hybrid.metrics import auroc  # noqa: E402
 from tcot_hybrid.learning.vocab import Vocabulary  # noqa: E402
 
 
@@ -203,10 +198,10 @@ def test_auroc_and_lift_helpers(camera):
     assert auroc(np.array([0.1, 0.2, 0.8, 0.9]), np.array([0, 0, 1, 1])) == 1.0
     assert auroc(np.array([0.9, 0.8, 0.2, 0.1]), np.array([0, 0, 1, 1])) == 0.0
     assert auroc(np.array([0.5, 0.5]), np.array([0, 1])) == 0.5
-    assert np.isnan(auroc(np.array([0.5]), np.array([1])))
+    assert auroc(np.array([0.5]), np.array([1])) is None
     pts = np.array([[0.5, 0.1, 0.05], [0.4, -0.2, 0.3]])
     uv, _ = camera.project(pts)
-    assert np.allclose(lift_points(camera, uv, pts[:, 2]), pts, atol=1e-9)
+    assert np.allclose(points_at_height(camera, uv, pts[:, 2]), pts, atol=1e-9)
 
 
 @pytest.fixture(scope="module")

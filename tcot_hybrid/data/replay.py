@@ -174,7 +174,7 @@ def cmd_replay(argv: list[str]) -> int:
     p.add_argument("--readme", type=Path, help="also write the table into this Markdown file's "
                    "<!-- replay:start/end --> section")
     args = p.parse_args(argv)
-    from tcot_hybrid.bench import has_readme_section, update_readme_section
+    from tcot_hybrid.markdown import has_readme_section, update_readme_section
 
     if args.readme is not None and not has_readme_section(args.readme, "replay"):
         raise ConfigError(f"--readme {args.readme} has no <!-- replay:start --> ... <!-- replay:end --> section")

@@ -171,8 +171,22 @@ def joint_bounds(spec: RobotSpec, cfg: IKConfig) -> tuple[np.ndarray, np.ndarray
     return lower, upper
 
 
+class IKStepFailed(Exception):
+    """Raised by a backend's :meth:`IKSolver._step` when no step can be taken; ``status`` (one of STATUSES)
+    ends the solve with that status."""
+
+    def __init__(self, status: str) -> None:
+        super().__init__(status)
+        self.status = status
+
+
 class IKSolver(ABC):
-    """One IK backend. Subclasses implement :meth:`_solve`; :meth:`solve` validates the inputs.
+    """One IK backend. :meth:`solve` validates the inputs; the iteration loop (:meth:`_solve`) is shared.
+
+    A backend implements :meth:`_tcp_at` (forward kinematics) and :meth:`_step` (one differential-IK
+    step), and may override :meth:`_begin` (per-solve setup, e.g. setting task targets). The loop checks
+    convergence, walks a seed outside the limit box inward, refuses non-finite steps, projects every step
+    into the velocity/position box and counts iterations, identically for every backend.
 
     Attributes available to subclasses (all per arm joint, in spec order):
     ``lower``/``upper``: limit box with margin [rad]; ``max_step``: largest |dq| per iteration [rad].
@@ -205,9 +219,54 @@ class IKSolver(ABC):
         q = self._check_seed(seed)
         return self._solve(pos, rot, q)
 
-    @abstractmethod
     def _solve(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> IKResult:
-        """Backend solve on validated inputs (``seed`` is a private float copy)."""
+        """The iteration loop on validated inputs (``seed`` is a private float copy)."""
+        cfg = self.config
+        self._begin(pos, rot, seed)
+        q = seed
+        status, iters, limit_active = MAX_ITERS, 0, False
+        for it in range(cfg.max_iters + 1):
+            pos_err, rot_err = self.errors(*self._tcp_at(q), pos, rot)
+            if self.is_converged(pos_err, rot_err):
+                status = CONVERGED
+                break
+            if it == cfg.max_iters:
+                break
+            if self.outside_box(q):
+                # Walk a seed outside the limits inward at <= v_max before solving (mink's ConfigurationLimit,
+                # for one, is infeasible when q is farther outside than one velocity step).
+                q = self.recovery_step(q)
+                limit_active = True
+            else:
+                try:
+                    dq, at_limit = self._step(q, pos, rot, pos_err, rot_err)
+                except IKStepFailed as exc:
+                    status = exc.status
+                    break
+                if not np.all(np.isfinite(dq)):
+                    status = NON_FINITE
+                    break
+                # Solver tolerance can leave a step a hair outside the velocity/position box: project.
+                lo, hi = self.step_bounds(q)
+                dq = np.clip(dq, lo, hi)
+                limit_active |= at_limit
+                q = q + dq
+            iters += 1
+        return IKResult(q.copy(), status == CONVERGED, status, iters, pos_err, rot_err, limit_active)
+
+    def _begin(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> None:
+        """Per-solve setup before the first iteration (default: nothing)."""
+
+    @abstractmethod
+    def _tcp_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """TCP position [m] (3,) and rotation (3, 3) in the world frame at arm configuration ``q`` [rad]."""
+
+    @abstractmethod
+    def _step(self, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, pos_err: float,
+              rot_err: float) -> tuple[np.ndarray, bool]:
+        """One step from ``q`` (inside the box, :meth:`_tcp_at` just evaluated there) toward the target
+        (``pos``, ``rot``): (dq [rad] in spec joint order, whether a position limit shaped it). Raise
+        :class:`IKStepFailed` when no step can be taken (e.g. QP infeasible)."""
 
     # -- helpers for backends -----------------------------------------------------------------------
 

@@ -21,13 +21,11 @@ from qpsolvers.warnings import SparseConversionWarning
 
 from tcot_hybrid.errors import RobotModelError
 from tcot_hybrid.ik.base import (
-    CONVERGED,
-    MAX_ITERS,
     NON_FINITE,
     QP_INFEASIBLE,
     IKConfig,
-    IKResult,
     IKSolver,
+    IKStepFailed,
     register_ik,
 )
 
@@ -173,61 +171,43 @@ class MinkIK(IKSolver):
         data = self.configuration.data
         return data.site_xpos[self._site_id].copy(), data.site_xmat[self._site_id].reshape(3, 3).copy()
 
-    def _solve(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> IKResult:
-        cfg = self.config
-        dt = cfg.step_dt_s
+    def _begin(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> None:
         self.frame_task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), pos))
         if self.posture_task is not None:
             self.posture_task.set_target(self._to_model(self.posture_for(seed)))
-        q = seed
+
+    def _tcp_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         self.configuration.update(self._to_model(q))
-        status, iters, limit_active = MAX_ITERS, 0, False
-        for it in range(cfg.max_iters + 1):
-            pos_err, rot_err = self.errors(*self._tcp(), pos, rot)
-            if self.is_converged(pos_err, rot_err):
-                status = CONVERGED
-                break
-            if it == cfg.max_iters:
-                break
-            if self.outside_box(q):
-                # mink's ConfigurationLimit is infeasible when q is farther outside than one velocity
-                # step; walk inward at <= v_max first, then let the QP take over.
-                q = self.recovery_step(q)
-                limit_active = True
-            else:
-                try:
-                    # Absurd (1e300 m) targets overflow inside mink; the result is checked for finiteness.
-                    with warnings.catch_warnings(), np.errstate(all="ignore"):
-                        # qpsolvers warns on every dense->sparse conversion for osqp; nothing to act on.
-                        warnings.simplefilter("ignore", SparseConversionWarning)
-                        v = mink.solve_ik(
-                            self.configuration,
-                            self._tasks_far if self.posture_active(pos_err, rot_err) else self._tasks_near,
-                            dt,
-                            cfg.solver,
-                            damping=cfg.damping,
-                            limits=self.limits,
-                            **self._solver_options,
-                        )
-                except (mink.NoSolutionFound, qpsolvers.QPError):
-                    status = QP_INFEASIBLE
-                    break
-                except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-                    # Overflowing error terms (absurdly far targets) reach the solver as inf/NaN.
-                    status = NON_FINITE
-                    break
-                dq = v[self._qidx] * dt
-                if not np.all(np.isfinite(dq)):
-                    status = NON_FINITE
-                    break
-                # Solver tolerance can leave a step a hair outside the velocity/position box: project.
-                lo, hi = self.step_bounds(q)
-                dq = np.clip(dq, lo, hi)
-                # ConfigurationLimit lets a joint cover at most `gain` of its distance to the limit.
-                gain = self._config_gain
-                at_limit = (dq >= gain * (self.upper - q) - 1e-9) | (dq <= gain * (self.lower - q) + 1e-9)
-                limit_active |= bool(np.any(at_limit))
-                q = q + dq
-            iters += 1
-            self.configuration.update(self._to_model(q))
-        return IKResult(q.copy(), status == CONVERGED, status, iters, pos_err, rot_err, limit_active)
+        return self._tcp()
+
+    def _step(self, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, pos_err: float,
+              rot_err: float) -> tuple[np.ndarray, bool]:
+        cfg = self.config
+        dt = cfg.step_dt_s
+        try:
+            # Absurd (1e300 m) targets overflow inside mink; the result is checked for finiteness.
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                # qpsolvers warns on every dense->sparse conversion for osqp; nothing to act on.
+                warnings.simplefilter("ignore", SparseConversionWarning)
+                v = mink.solve_ik(
+                    self.configuration,
+                    self._tasks_far if self.posture_active(pos_err, rot_err) else self._tasks_near,
+                    dt,
+                    cfg.solver,
+                    damping=cfg.damping,
+                    limits=self.limits,
+                    **self._solver_options,
+                )
+        except (mink.NoSolutionFound, qpsolvers.QPError):
+            raise IKStepFailed(QP_INFEASIBLE) from None
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            # Overflowing error terms (absurdly far targets) reach the solver as inf/NaN.
+            raise IKStepFailed(NON_FINITE) from None
+        dq = v[self._qidx] * dt
+        if not np.all(np.isfinite(dq)):
+            raise IKStepFailed(NON_FINITE)
+        dq = np.clip(dq, *self.step_bounds(q))
+        # ConfigurationLimit lets a joint cover at most `gain` of its distance to the limit.
+        gain = self._config_gain
+        at_limit = (dq >= gain * (self.upper - q) - 1e-9) | (dq <= gain * (self.lower - q) + 1e-9)
+        return dq, bool(np.any(at_limit))

@@ -17,12 +17,10 @@ import pinocchio as pin
 
 from tcot_hybrid.errors import RobotModelError
 from tcot_hybrid.ik.base import (
-    CONVERGED,
-    MAX_ITERS,
     NON_FINITE,
     IKConfig,
-    IKResult,
     IKSolver,
+    IKStepFailed,
     register_ik,
 )
 
@@ -60,7 +58,7 @@ class PinocchioIK(IKSolver):
         q_model[self._qidx] = q
         return q_model
 
-    def _step(
+    def _gauss_newton_step(
         self, J_e: np.ndarray, err: np.ndarray, q: np.ndarray, q_post: np.ndarray, *, posture: bool
     ) -> tuple[np.ndarray, bool]:
         """One regularised Gauss-Newton step in spec joint order, within velocity and position box.
@@ -93,49 +91,27 @@ class PinocchioIK(IKSolver):
                 break
         return dq, clamped
 
-    def _solve(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> IKResult:
-        cfg = self.config
-        model, data, fid = self.model, self.data, self._frame_id
-        oMdes = pin.SE3(rot, pos)
-        q_post = self.posture_for(seed)
-        q = seed
-        status, iters, limit_active = MAX_ITERS, 0, False
-        for it in range(cfg.max_iters + 1):
-            q_model = self._to_model(q)
-            pin.forwardKinematics(model, data, q_model)
-            oMf = pin.updateFramePlacement(model, data, fid)
-            pos_err, rot_err = self.errors(oMf.translation, oMf.rotation, pos, rot)
-            if self.is_converged(pos_err, rot_err):
-                status = CONVERGED
-                break
-            if it == cfg.max_iters:
-                break
-            if self.outside_box(q):
-                # Walk a seed outside the limits inward at <= v_max before solving.
-                q = self.recovery_step(q)
-                limit_active = True
-                iters += 1
-                continue
-            with np.errstate(all="ignore"):
-                fMd = oMf.actInv(oMdes)
-                err = pin.log6(fMd).vector
-                J = pin.computeFrameJacobian(model, data, q_model, fid, pin.ReferenceFrame.LOCAL)
-                J_e = -pin.Jlog6(fMd.inverse()) @ J[:, self._qidx]
-                if not (np.all(np.isfinite(err)) and np.all(np.isfinite(J_e))):
-                    status = NON_FINITE
-                    break
-                try:
-                    posture = self.posture_active(pos_err, rot_err)
-                    dq, clamped = self._step(J_e, err, q, q_post, posture=posture)
-                except np.linalg.LinAlgError:
-                    status = NON_FINITE
-                    break
-            if not np.all(np.isfinite(dq)):
-                status = NON_FINITE
-                break
-            lo, hi = self.step_bounds(q)
-            dq = np.clip(dq, lo, hi)  # round-off only: _step already respects the box
-            limit_active |= clamped
-            q = q + dq
-            iters += 1
-        return IKResult(q.copy(), status == CONVERGED, status, iters, pos_err, rot_err, limit_active)
+    def _begin(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> None:
+        self._oMdes = pin.SE3(rot, pos)
+        self._q_post = self.posture_for(seed)
+
+    def _tcp_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self._q_model = self._to_model(q)
+        pin.forwardKinematics(self.model, self.data, self._q_model)
+        self._oMf = pin.updateFramePlacement(self.model, self.data, self._frame_id)
+        return self._oMf.translation, self._oMf.rotation
+
+    def _step(self, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, pos_err: float,
+              rot_err: float) -> tuple[np.ndarray, bool]:
+        with np.errstate(all="ignore"):
+            fMd = self._oMf.actInv(self._oMdes)
+            err = pin.log6(fMd).vector
+            J = pin.computeFrameJacobian(self.model, self.data, self._q_model, self._frame_id, pin.ReferenceFrame.LOCAL)
+            J_e = -pin.Jlog6(fMd.inverse()) @ J[:, self._qidx]
+            if not (np.all(np.isfinite(err)) and np.all(np.isfinite(J_e))):
+                raise IKStepFailed(NON_FINITE)
+            try:
+                posture = self.posture_active(pos_err, rot_err)
+                return self._gauss_newton_step(J_e, err, q, self._q_post, posture=posture)
+            except np.linalg.LinAlgError:
+                raise IKStepFailed(NON_FINITE) from None

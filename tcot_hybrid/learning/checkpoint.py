@@ -237,7 +237,7 @@ def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, 
     from safetensors.torch import load as st_load
 
     from tcot_hybrid.learning.model import ModelConfig, PlannerNet
-    from tcot_hybrid.run_config import from_mapping
+    from tcot_hybrid.config import from_mapping
 
     p = Path(path)
     where = f"checkpoint {str(p)!r}"

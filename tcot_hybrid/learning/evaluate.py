@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tcot_hybrid.camera import points_at_height
 from tcot_hybrid.errors import PlanningError
+from tcot_hybrid.metrics import auroc
 
 # One unseen rewording per task instruction (words outside the training vocabulary on purpose).
 PARAPHRASES = {
@@ -41,7 +43,7 @@ def _pct(x: np.ndarray, q: float, scale: float = 1.0) -> float:
 
 
 def evaluate_trajectory(ck, frames, camera, *, idx: np.ndarray | None = None) -> dict:
-    from tcot_hybrid.learning.train import auroc, lift_points, predict
+    from tcot_hybrid.learning.validation import predict
 
     model, meta = ck.model, ck.meta
     ng, center = model.cfg.n_global, int(meta["windows"]["L_g"]) // 2
@@ -60,7 +62,7 @@ def evaluate_trajectory(ck, frames, camera, *, idx: np.ndarray | None = None) ->
             uvt, zt, gt, xyz = (a[idx].numpy() for a in (frames.l_uv, frames.l_z, frames.l_grip, frames.l_xyz))
         uv, z, grip = o["uv_px"][:, sl], o["z_m"][:, sl], o["grip_logit"][:, sl] > 0
         px = np.linalg.norm(uv - uvt, axis=-1)
-        e3 = np.linalg.norm(lift_points(camera, uv, z) - xyz, axis=-1)
+        e3 = np.linalg.norm(points_at_height(camera, uv, z) - xyz, axis=-1)
         ok = grip == (gt > 0.5)
         # stop points: where the demo's gripper bit changes (grasp / release) — what decides a grasp
         stop = np.zeros_like(ok)
@@ -87,7 +89,9 @@ def evaluate_trajectory(ck, frames, camera, *, idx: np.ndarray | None = None) ->
     d = predict(model, frames, idx, "detect")
     p = 1 / (1 + np.exp(-d["success_logit"]))
     y = frames.success[idx].numpy()
-    res["detect"] = {"auroc": round(auroc(p, y), 4), "acc": round(float(((p > 0.5) == (y > 0.5)).mean()), 4),
+    a = auroc(p, y)
+    res["detect"] = {"auroc": round(a, 4) if a is not None else float("nan"),
+                     "acc": round(float(((p > 0.5) == (y > 0.5)).mean()), 4),
                      "positives": int((y > 0.5).sum()), "negatives": int((y <= 0.5).sum())}
     res["per_task"] = per_task
     return res
@@ -107,12 +111,12 @@ def stop_sequence(points: np.ndarray, grip: np.ndarray) -> list[tuple[np.ndarray
 def t0_stop_errors(ck, frames, camera) -> dict:
     """Closed-loop proxy for global plans made at t = 0: compare the gripper-switch positions the executor
     would use on the predicted plan with those of the demonstration (same logic on the true window)."""
-    from tcot_hybrid.learning.train import lift_points, predict
+    from tcot_hybrid.learning.validation import predict
 
     ng, center = ck.model.cfg.n_global, int(ck.meta["windows"]["L_g"]) // 2
     idx = np.flatnonzero(frames.t == 0)
     o = predict(ck.model, frames, idx, "global")
-    pts = lift_points(camera, o["uv_px"][:, center:ng], o["z_m"][:, center:ng])
+    pts = points_at_height(camera, o["uv_px"][:, center:ng], o["z_m"][:, center:ng])
     grip = o["grip_logit"][:, center:ng] > 0
     xyz, gt = frames.g_xyz[idx][:, center:].numpy(), frames.g_grip[idx][:, center:].numpy() > 0.5
     same_count, errs, per_task = 0, [], {}
@@ -137,7 +141,7 @@ def paraphrase_robustness(ck, frames, camera, vocab) -> dict:
     """Global-plan error at t = 0 with each task's instruction replaced by an unseen rewording."""
     import torch
 
-    from tcot_hybrid.learning.train import lift_points, predict
+    from tcot_hybrid.learning.validation import predict
 
     max_unknown = float(ck.meta.get("max_unknown_fraction", 0.5))
     ng, center = ck.model.cfg.n_global, int(ck.meta["windows"]["L_g"]) // 2
@@ -161,8 +165,8 @@ def paraphrase_robustness(ck, frames, camera, vocab) -> dict:
     finally:
         frames.tokens.copy_(saved)
     xyz = frames.g_xyz[idx][:, center:].numpy()
-    e_base = np.linalg.norm(lift_points(camera, base["uv_px"][:, center:ng], base["z_m"][:, center:ng]) - xyz, axis=-1)
-    e_para = np.linalg.norm(lift_points(camera, para_out["uv_px"][:, center:ng], para_out["z_m"][:, center:ng]) - xyz,
+    e_base = np.linalg.norm(points_at_height(camera, base["uv_px"][:, center:ng], base["z_m"][:, center:ng]) - xyz, axis=-1)
+    e_para = np.linalg.norm(points_at_height(camera, para_out["uv_px"][:, center:ng], para_out["z_m"][:, center:ng]) - xyz,
                             axis=-1)
     return {"pairs": rows, "refused": sorted(set(refused)),
             "t0_3d_cm_median_original": _pct(e_base, 50, 100), "t0_3d_cm_p90_original": _pct(e_base, 90, 100),
@@ -170,7 +174,7 @@ def paraphrase_robustness(ck, frames, camera, vocab) -> dict:
 
 
 def evaluate_direct(ck, frames, idx=None) -> dict:
-    from tcot_hybrid.learning.train import direct_metrics
+    from tcot_hybrid.learning.validation import direct_metrics
 
     idx = np.arange(len(frames)) if idx is None else idx
     return direct_metrics(ck.model, frames, idx)
@@ -271,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.section is not None and args.readme is None:
         p.error("--section names a section of the --readme file; give --readme too")
     if args.readme is not None:  # fail before the evaluation, not after it
-        from tcot_hybrid.bench import has_readme_section
+        from tcot_hybrid.markdown import has_readme_section
 
         names = [args.section] if args.section else ["planner_eval", "direct_eval"]
         if not any(has_readme_section(args.readme, n) for n in names):
@@ -283,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     r = run(args.checkpoint, args.data, split=args.split, out=args.out, command=cmdline, stem=args.stem)
     print(markdown(r))
     if args.readme:
-        from tcot_hybrid.bench import update_readme_section
+        from tcot_hybrid.markdown import update_readme_section
 
         section = args.section or ("direct_eval" if r["kind"] == "direct" else "planner_eval")
         update_readme_section(args.readme, section, markdown(r))

@@ -136,7 +136,7 @@ class LiberoTask(Task):
             raise ConfigError(f"LIBERO task {self.name!r} runs robot {ROBOT!r} (its scenes mount that Panda), "
                               f"not {robot.name!r}; drop --robot or pass --robot {ROBOT}")
         px = max(scene.planner_image_px, scene.video_width, scene.video_height)
-        self.scene = LiberoScene.build(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
+        self.scene = LiberoScene.acquire(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
         check_camera(self.scene.model, scene.planner_camera)
         objects = libero_objects(self.scene)
         return BuiltScene(model=self.scene.model, data=self.scene.data, objects=objects,
@@ -144,6 +144,11 @@ class LiberoTask(Task):
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
                                            int(mujoco.mjtRndFlag.mjRND_REFLECTION)))
+
+    def release_scene(self) -> None:
+        if self.scene is not None:
+            self.scene.release()
+            self.scene = None
 
     def add_objects(self, spec):  # pragma: no cover - LIBERO builds its own scene
         raise NotImplementedError("LIBERO tasks build their scene with build_scene")

@@ -44,8 +44,13 @@ class World:
     """Read/write access to the simulated scene by object name (privileged: oracle, predicates, resets)."""
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, objects: dict[str, ObjectInfo], *,
-                 ee_site: str, finger_geoms: tuple[tuple[int, ...], ...]):
+                 ee_site: str, finger_geoms: tuple[tuple[int, ...], ...],
+                 gripper: tuple[tuple[int, float, float], ...]):
+        """``gripper``: (actuator id, ctrl when open, ctrl when closed) per gripper actuator."""
         self.model, self.data, self.objects = model, data, objects
+        if not gripper:
+            raise ValueError("World needs at least one gripper actuator (id, open ctrl, closed ctrl)")
+        self.gripper = tuple((int(a), float(o), float(c)) for a, o, c in gripper)
         self._body = {o.name: model.body(o.body).id for o in objects.values()}
         self._jnt = {o.name: model.joint(o.joint).id for o in objects.values()}
         self._site = model.site(ee_site).id
@@ -104,15 +109,29 @@ class World:
         """True when both fingers touch the object (it is between the closed fingers, lifted or not)."""
         return all(self.touching(name, f) for f in self.fingers)
 
+    def fingers_open(self) -> bool:
+        """Every gripper actuator is commanded open (its ctrl nearer the open value than the closed one)."""
+        ctrl = self.data.ctrl
+        return all(abs(ctrl[a] - o) < abs(ctrl[a] - c) for a, o, c in self.gripper)
+
     def is_grasped(self, name: str) -> bool:
         """True when the object touches the gripper's fingers and is off the table."""
         o = self.objects[name]
         return self.touching(name, self.finger_geoms) and self.pos(name)[2] > o.rest_z + 0.01
 
     def speed(self, name: str) -> float:
+        """Linear speed of a free object [m/s] (a drawer: its slide speed)."""
         j = self._jnt[name]
         v = self.model.jnt_dofadr[j]
-        return float(np.linalg.norm(self.data.qvel[v:v + 3]))
+        return float(np.linalg.norm(self.data.qvel[v:v + (3 if self.model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE else 1)]))
+
+    def spin(self, name: str) -> float:
+        """Angular speed of a free object [rad/s]; 0 for objects on other joints."""
+        j = self._jnt[name]
+        if self.model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+            return 0.0
+        v = self.model.jnt_dofadr[j]
+        return float(np.linalg.norm(self.data.qvel[v + 3:v + 6]))
 
 
 def sample_apart(rng: np.random.Generator, regions: dict[str, tuple[float, float, float, float]],
@@ -279,6 +298,9 @@ class Task(ABC):
 
         return build_workcell_scene(robot, self.add_objects, config=scene, sim_dt=timing.sim_dt)
 
+    def release_scene(self) -> None:
+        """The simulation built from ``build_scene`` is closed (a LIBERO task keeps its scene for reuse)."""
+
     def set_episode(self, *, seed: int, init: str | None) -> None:
         """Choose how ``reset`` lays the scene out for the episode ``seed``: ``init`` is one of ``init_modes``
         (None: the first). Workcell tasks always sample a fresh layout from the seed."""
@@ -304,38 +326,3 @@ class Task(ABC):
     @abstractmethod
     def skills(self) -> list[Skill]:
         """The privileged oracle script, in order."""
-
-
-# --- predicate helpers --------------------------------------------------------------------------------
-
-def resting_on(world: World, obj: str, surface: str, *, tol_z: float = 0.015) -> bool:
-    """obj lies on a plate-like surface: inside its radius, at the right height, released and still."""
-    o, s = world.objects[obj], world.objects[surface]
-    p, q = world.pos(obj), world.pos(surface)
-    inside = np.linalg.norm(p[:2] - q[:2]) <= s.inner_half - 0.01
-    height = abs((p[2] - o.half_height) - (q[2] + s.half_height)) <= tol_z
-    return bool(inside and height and not world.is_grasped(obj) and world.speed(obj) < 0.05)
-
-
-def inside_container(world: World, obj: str, container: str) -> bool:
-    """obj is inside a bowl/basket/drawer: within its inner extent, below its rim, released and still."""
-    o, c = world.objects[obj], world.objects[container]
-    p = world.pos(obj)
-    local = world.rot(container).T @ (p - world.pos(container))
-    if c.kind == "bowl":
-        inside_xy = np.linalg.norm(local[:2]) <= c.inner_half - 0.005
-    elif c.kind == "drawer":
-        from tcot_hybrid.tasks.objects import DRAWER_INNER
-
-        inside_xy = abs(local[0] - (0.01 + DRAWER_INNER[0])) <= DRAWER_INNER[0] and abs(local[1]) <= DRAWER_INNER[1]
-    else:
-        inside_xy = np.all(np.abs(local[:2]) <= c.inner_half)
-    below_rim = local[2] - o.half_height <= c.bottom + c.rim_height
-    return bool(inside_xy and below_rim and not world.is_grasped(obj) and world.speed(obj) < 0.05)
-
-
-def stacked_on(world: World, top: str, bottom: str) -> bool:
-    t, b = world.pos(top), world.pos(bottom)
-    ht, hb = world.objects[top].half_height, world.objects[bottom].half_height
-    return bool(np.linalg.norm(t[:2] - b[:2]) <= min(ht, hb) and abs(t[2] - b[2] - ht - hb) <= 0.01
-                and not world.is_grasped(top) and world.speed(top) < 0.05)

@@ -31,6 +31,8 @@ class ObjectInfo:
     half_height: half of the object's height [m] (a free body's origin is its centre)
     inner_half: for receptacles, inner half-extent [m] (radius for round ones)
     rim_height: for receptacles, wall height above the bottom [m]
+    bottom:     for receptacles, height of the floor's top face in the body frame [m] (plate: its top face)
+    rim_top:    for receptacles, height of the wall's top edge in the body frame [m]
     joint: name of the joint that moves it (free joint, or the drawer's slide)
     """
 
@@ -42,6 +44,7 @@ class ObjectInfo:
     inner_half: float = 0.0
     rim_height: float = 0.0
     bottom: float = 0.0
+    rim_top: float = 0.0
     rest_z: float = 0.0  # height of the body origin when resting on the table [m]
 
 
@@ -83,7 +86,7 @@ def bowl(spec, name: str = "bowl", inner_radius: float = 0.07, wall_h: float = 0
                  rgba=ORANGE, name=f"{name}_wall{i}", mass=mass * 0.6 / n_walls)
     return ObjectInfo(name=name, kind="bowl", body=name, joint=f"{name}_free", half_height=wall_h / 2,
                       inner_half=inner_radius, rim_height=wall_h, bottom=-wall_h / 2 + bottom_half,
-                      rest_z=wall_h / 2 + bottom_half)
+                      rim_top=wall_h / 2, rest_z=wall_h / 2 + bottom_half)
 
 
 def basket(spec, name: str = "basket", inner_half: float = 0.08, wall_h: float = 0.06, wall_t: float = 0.008,
@@ -100,7 +103,7 @@ def basket(spec, name: str = "basket", inner_half: float = 0.08, wall_h: float =
                  name=f"{name}_wall{i}", mass=mass * 0.15)
     return ObjectInfo(name=name, kind="basket", body=name, joint=f"{name}_free", half_height=wall_h / 2,
                       inner_half=inner_half, rim_height=wall_h, bottom=-wall_h / 2 + 0.005,
-                      rest_z=wall_h / 2 + 0.005)
+                      rim_top=wall_h / 2, rest_z=wall_h / 2 + 0.005)
 
 
 # Drawer geometry [m]: cabinet outer half extents and the drawer's interior.
@@ -161,7 +164,7 @@ def drawer(spec, name: str = "drawer") -> ObjectInfo:
     add_geom(drw, type=GEOM.mjGEOM_BOX, size=(0.015, 0.0125, 0.02), pos=(-t - 0.015, 0, front_h - 0.02),
              rgba=BLUE, name=f"{name}_handle", mass=0.05)
     return ObjectInfo(name=name, kind="drawer", body=name, joint=f"{name}_slide", half_height=DRAWER_WALL_H / 2,
-                      inner_half=min(ix, iy), rim_height=DRAWER_WALL_H, bottom=t)
+                      inner_half=min(ix, iy), rim_height=DRAWER_WALL_H, bottom=t, rim_top=DRAWER_WALL_H)
 
 
 STICK_LENGTH = 0.40

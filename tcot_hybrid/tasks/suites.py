@@ -17,11 +17,9 @@ from tcot_hybrid.tasks.base import (
     PullDrawer,
     Task,
     World,
-    inside_container,
-    resting_on,
     sample_apart,
-    stacked_on,
 )
+from tcot_hybrid.tasks.predicates import inside_container, released, resting_on, settled, stacked_on
 from tcot_hybrid.tasks.registry import register_task
 
 # Clearance radii [m] for layout sampling: an object's footprint plus, for graspable ones, the open
@@ -249,7 +247,8 @@ class GoalOpenDrawer(_GoalLayout):
     instruction = "open the drawer"
 
     def success(self, world):
-        return self.drawer_open(world)
+        """Open (slide travel >= DRAWER_OPEN_SUCCESS_M), the handle let go (released) and the drawer still."""
+        return bool(self.drawer_open(world) and released(world, "drawer") and settled(world, "drawer"))
 
     def skills(self):
         return [PullDrawer("drawer", distance=DRAWER_PULL_M, achieved=self.success)]
@@ -349,7 +348,10 @@ class ToolPullCubeWithStick(Task):
         world.set_pose("stick", (rng.uniform(0.3, 0.34), sy, 0.0105), _yaw(rng, 0.1))
 
     def success(self, world):
-        return bool(world.pos("cube")[0] < TOOL_REACH_X and world.speed("cube") < 0.05)
+        """The cube's centre nearer than TOOL_REACH_X, no finger on it, and at rest (the stick may still be held:
+        the cube, not the tool, is what is delivered)."""
+        return bool(world.pos("cube")[0] < TOOL_REACH_X and not world.touching("cube", world.finger_geoms)
+                    and settled(world, "cube"))
 
     def skills(self):
         return [HookPull("stick", "cube", pull_to_x=0.33, achieved=self.success)]

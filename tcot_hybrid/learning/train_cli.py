@@ -1,0 +1,69 @@
+"""``tcot train`` on the command line: a TrainConfig from a file and flags, optionally collecting the
+demonstrations first."""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated
+
+import tyro
+
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.learning.train import train
+from tcot_hybrid.learning.train_config import TrainConfig, load_train_config
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainCommand:
+    """Train the learned planner (or the direct baseline) and write a checkpoint.
+
+    With --collect, first collects demonstrations with the oracle (``tcot collect``) into --cfg.data when
+    the file does not exist yet: nothing → usable checkpoint in one command.
+    """
+
+    cfg: Annotated[TrainConfig, tyro.conf.arg(name="")] = field(default_factory=TrainConfig)
+    config: Path | None = None
+    """YAML/TOML/JSON file with TrainConfig fields; command-line flags override it."""
+    collect: bool = False
+    """Collect the demonstration file first if it is missing."""
+    robot: str = "panda"
+    """Robot to collect demonstrations with (only with --collect)."""
+    episodes_per_task: int = 50
+    """Demonstrations per task to collect (only with --collect); seeds 0 .. N-1."""
+    workers: int = 2
+    """Collection worker processes (only with --collect)."""
+
+
+def cmd_train(argv: list[str]) -> int:
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--config", type=Path)
+    known, _ = pre.parse_known_args(argv)
+    base = load_train_config(known.config) if known.config else TrainConfig()
+    cmd = tyro.cli(TrainCommand, args=argv, default=TrainCommand(cfg=base, config=known.config), prog="tcot train")
+    t0 = time.perf_counter()
+    data = Path(cmd.cfg.data)
+    if cmd.collect and data.exists():
+        from tcot_hybrid.learning.data import env_of
+
+        have = env_of(data)[0].get("robot")
+        if have != cmd.robot:
+            raise ConfigError(f"--collect --robot {cmd.robot}: {str(data)!r} already holds {have!r} demonstrations; "
+                              f"pass --data data/demos_{cmd.robot}.hdf5")
+    if cmd.collect and not data.exists():
+        from tcot_hybrid.data.collect import cmd_collect
+
+        rc = cmd_collect(["--robot", cmd.robot, "--episodes-per-task", str(cmd.episodes_per_task),
+                          "--seed-start", "0", "--workers", str(cmd.workers), "--out", str(data)])
+        if rc != 0:
+            return rc
+        print(f"collection took {(time.perf_counter() - t0) / 60:.1f} min")
+    elif not data.exists():
+        raise ConfigError(f"demonstration file {str(data)!r} does not exist; run `tcot collect --out {data}` "
+                          f"or add --collect")
+    os.environ.setdefault("OMP_NUM_THREADS", str(cmd.cfg.threads))
+    res = train(cmd.cfg)
+    print(f"total time {(time.perf_counter() - t0) / 60:.1f} min -> {res.checkpoint}")
+    return 0

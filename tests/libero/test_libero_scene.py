@@ -1,0 +1,134 @@
+"""A LIBERO scene under this stack: camera model vs rendered pixels, world<->base transform, the LIBERO Panda's
+Pinocchio model vs the scene's MuJoCo, init states and the goal check."""
+import mujoco
+import numpy as np
+import pytest
+
+from tcot_hybrid.robot import build_pinocchio_model, load_robot_spec
+from tcot_hybrid.sim import robot_root_body
+
+MARKER_R = 0.02  # [m]
+PX = 256
+
+
+def _marker_mask(sim, point, *, px=PX):
+    """Pixels a red sphere at ``point`` changes in the agentview image."""
+    base = sim.render("agentview", px, px).astype(int)
+    r = sim.renderer(px, px)
+    r.update_scene(sim.data, camera="agentview", scene_option=sim.render_option)
+    g = r.scene.geoms[r.scene.ngeom]
+    mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([MARKER_R, 0, 0]), np.asarray(point, float),
+                        np.eye(3).ravel(), np.array([1, 0, 0, 1], np.float32))
+    r.scene.ngeom += 1
+    img = r.render().astype(int)
+    return np.abs(img - base).max(axis=2) > 40
+
+
+def test_agentview_projection_matches_rendered_markers(libero_runner):
+    from tcot_hybrid.camera import CameraModel
+
+    sim = libero_runner.stack.sim
+    cam = CameraModel.from_mujoco(sim.model, sim.data, "agentview", width=PX, height=PX)
+    z = sim.support_z + 0.15
+    points = [(x, y, z) for x in (-0.2, 0.0, 0.15) for y in (-0.2, 0.0, 0.2)]
+    uv, depth = cam.project(np.array(points))
+    errors = []
+    for p, (u, v), dep in zip(points, uv, depth):
+        mask = _marker_mask(sim, p)
+        full_area = np.pi * (cam.K[0, 0] * MARKER_R / dep) ** 2
+        if mask.sum() < 0.9 * full_area:  # partly hidden behind a fixture: its centroid would be biased
+            continue
+        rows, cols = np.nonzero(mask)
+        errors.append(np.hypot(cols.mean() - u, rows.mean() - v))
+    print(f"LIBERO agentview at {PX} px: projected centre vs rendered centroid, max {max(errors):.3f} px "
+          f"over {len(errors)} unoccluded markers")
+    assert len(errors) >= 6
+    assert max(errors) <= 1.0
+    assert np.all(depth > cam.near_m)
+
+
+def test_world_base_transform_round_trip_and_placement(libero_runner, rng):
+    sim = libero_runner.stack.sim
+    T, Tinv = sim.T_world_base, sim.T_base_world
+    np.testing.assert_allclose(T @ Tinv, np.eye(4), atol=1e-12)
+    root = robot_root_body(sim.model, sim.robot.arm_joints[0])
+    np.testing.assert_allclose(T[:3, 3], sim.data.xpos[root], atol=1e-12)  # the robot-only MJCF's base is at 0
+    p = rng.uniform(-1, 1, size=(20, 3))
+    back = (Tinv[:3, :3] @ (T[:3, :3] @ p.T + T[:3, 3:4]) + Tinv[:3, 3:4]).T
+    np.testing.assert_allclose(back, p, atol=1e-12)
+    assert sim.support_z == pytest.approx(0.9, abs=0.05)  # LIBERO's table top, not z = 0
+
+
+def test_libero_panda_pinocchio_matches_scene(libero_runner, rng):
+    """FK (TCP pose through T_world_base), mass matrix and bias forces of the bundled robot-only model vs the
+    MuJoCo scene LIBERO compiled, at random configurations and velocities."""
+    import pinocchio as pin
+
+    sim = libero_runner.stack.sim
+    m, d0 = sim.model, sim.data
+    d = mujoco.MjData(m)
+    d.qpos[:], d.qvel[:] = d0.qpos, 0.0
+    spec = load_robot_spec("libero_panda")
+    robot = build_pinocchio_model(spec)
+    pm, pd = robot.model, robot.model.createData()
+    names = robot.joint_names
+    qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in names])
+    vadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in names])
+    lo, hi = pm.lowerPositionLimit, pm.upperPositionLimit
+    T = sim.T_world_base
+    worst = {"fk": 0.0, "M": 0.0, "bias": 0.0}
+    for _ in range(10):
+        q = rng.uniform(lo, hi)
+        v = rng.uniform(-1, 1, size=pm.nv)
+        d.qpos[qadr], d.qvel[vadr] = q, v
+        mujoco.mj_forward(m, d)
+        pin.framesForwardKinematics(pm, pd, q)
+        tcp = pd.oMf[robot.tcp_frame_id]
+        site = m.site(spec.ee_site).id
+        worst["fk"] = max(worst["fk"], np.abs(T[:3, :3] @ tcp.translation + T[:3, 3] - d.site_xpos[site]).max(),
+                          np.abs(T[:3, :3] @ tcp.rotation - d.site_xmat[site].reshape(3, 3)).max())
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        M_pin = pin.crba(pm, pd, q)
+        M_pin = np.triu(M_pin) + np.triu(M_pin, 1).T
+        worst["M"] = max(worst["M"], np.abs(M_pin - M[np.ix_(vadr, vadr)]).max())
+        worst["bias"] = max(worst["bias"], np.abs(pin.rnea(pm, pd, q, v, np.zeros(pm.nv)) - d.qfrc_bias[vadr]).max())
+    print(f"LIBERO Panda, Pinocchio vs the LIBERO scene over 10 random states: {worst}")
+    assert worst["fk"] <= 1e-9 and worst["M"] <= 1e-9 and worst["bias"] <= 1e-9, worst
+
+
+def test_shipped_init_state_and_goal_check(libero_runner):
+    """--init shipped loads state number seed mod N; the stack's verdict is LIBERO's own goal check."""
+    task, sim = libero_runner.stack.task, libero_runner.stack.sim
+    states = task.init_states()
+    assert states.shape == (50, 1 + sim.model.nq + sim.model.nv)
+    task.set_episode(seed=53, init="shipped")
+    sim.reset(np.random.default_rng(53))
+    np.testing.assert_allclose(sim.data.qpos, states[3][1:1 + sim.model.nq])
+    assert task.success(sim.world) == bool(task.scene.env._check_success()) is False
+    # Put the goal's object on its target by hand: LIBERO's check and the stack's verdict agree it is done.
+    goal = task.scene.env.parsed_problem["goal_state"]
+    assert goal == [["on", "akita_black_bowl_1", "plate_1"]]
+    w = sim.world
+    plate = w.pos("plate_1")
+    j = sim.model.joint(w.objects["akita_black_bowl_1"].joint).id
+    a = sim.model.jnt_qposadr[j]
+    sim.data.qpos[a:a + 3] = plate + np.array([0, 0, 0.03])
+    for _ in range(500):
+        mujoco.mj_step(sim.model, sim.data)
+    assert task.success(sim.world) == bool(task.scene.env._check_success()) is True
+
+
+def test_sampled_layouts_are_seeded(libero_runner):
+    task, sim = libero_runner.stack.task, libero_runner.stack.sim
+    layouts = []
+    for seed in (11, 12, 11):
+        task.set_episode(seed=seed, init="sampled")
+        sim.reset(np.random.default_rng(seed))
+        layouts.append(sim.data.qpos.copy())
+    np.testing.assert_array_equal(layouts[0], layouts[2])
+    assert np.abs(layouts[0] - layouts[1]).max() > 1e-3
+    state = np.random.get_state()[1][:5].copy()
+    task.set_episode(seed=13, init="sampled")
+    sim.reset(np.random.default_rng(13))
+    np.testing.assert_array_equal(np.random.get_state()[1][:5], state)  # numpy's global generator restored

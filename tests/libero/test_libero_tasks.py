@@ -1,0 +1,65 @@
+"""LIBERO names in the task registry and the CLI: listing, bad input, and the LIBERO-less install's error."""
+import json
+from pathlib import Path
+
+import pytest
+
+import tcot_hybrid.libero as libero_pkg
+from tcot_hybrid.cli import main
+from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.run_config import RunConfig
+from tcot_hybrid.tasks import default_robot, list_all_tasks, make_task, suite_task_names
+
+STANDARD = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+
+
+def test_without_libero_the_names_say_how_to_install(monkeypatch, capsys):
+    monkeypatch.setattr(libero_pkg, "libero_available", lambda: False)
+    for bad in (lambda: make_task("libero_spatial:anything"), lambda: suite_task_names("libero_10")):
+        with pytest.raises(libero_pkg.LiberoMissingError, match="make libero"):
+            bad()
+    workcell = list_all_tasks()
+    assert workcell and all(t["world"] == "workcell" for t in workcell)  # everything else works as before
+    assert make_task("goal_cube_on_plate").name == "goal_cube_on_plate"
+    assert main(["run", "--task", "libero_goal:open_the_middle_drawer_of_the_cabinet", "--out", "/tmp/unused"]) == 2
+    assert "LIBERO is not installed" in capsys.readouterr().err
+
+
+def test_robot_auto_follows_the_task():
+    assert RunConfig(task="libero_10:whatever").robot == "libero_panda" == default_robot("libero_goal:x")
+    assert RunConfig().robot == "panda"
+    assert RunConfig(task="libero_10:whatever", robot="panda").robot == "panda"  # explicit stays explicit
+    with pytest.raises(ConfigError, match="shipped, sampled"):
+        RunConfig(init="fresh")
+
+
+def test_every_registered_suite_is_listed(capsys):
+    pytest.importorskip("libero")
+    assert main(["list", "--json"]) == 0
+    tasks = json.loads(capsys.readouterr().out)["tasks"]
+    suites = {t["suite"] for t in tasks}
+    assert set(STANDARD) <= suites and len(suites) > 20
+    for s in STANDARD:
+        named = [t for t in tasks if t["suite"] == s]
+        assert len(named) == 10 and all(t["name"].startswith(s + ":") and t["instruction"] for t in named)
+
+
+def test_bad_libero_names_and_init_states(tmp_path, capsys):
+    pytest.importorskip("libero")
+    with pytest.raises(ConfigError, match="suites: libero_spatial, libero_object"):
+        make_task("libero_nope:x")
+    with pytest.raises(ConfigError, match="did you mean"):
+        make_task("libero_spatial:pick_up_the_black_bowl_next_to_the_ramekin_and_place_it_on_the_plat")
+    with pytest.raises(ConfigError, match="suite"):
+        suite_task_names("libero_nope")
+    assert main(["eval", "--suite", "libero_nope", "--out", str(tmp_path / "e")]) == 2
+    assert "libero_nope" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="not available for task 'goal_cube_on_plate'"):
+        make_task("goal_cube_on_plate").set_episode(seed=0, init="shipped")
+    import dataclasses
+
+    task = make_task(suite_task_names("libero_goal")[0])
+    task.info = dataclasses.replace(task.info, init_states_path=Path(tmp_path / "missing.pruned_init"))
+    with pytest.raises(ConfigError, match="no usable shipped init states"):
+        task.set_episode(seed=0, init="shipped")
+    task.set_episode(seed=0, init="sampled")  # a sampled layout needs no init states
