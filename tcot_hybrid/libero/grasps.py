@@ -42,11 +42,18 @@ def frame(z_axis, y_axis) -> np.ndarray:
     return np.column_stack([np.cross(y, z), y, z])
 
 
+# The hand's yaw (about world z, from the home hand) is kept in (YAW_MIN - 180, YAW_MIN] degrees. Measured on
+# the stove knob (libero_goal turn_on_the_stove, sampled seed 0): a +90 degree hand tripped joint 7's tracking
+# reflex on the way there (its 12 N m motor lags), the -90 degree hand turned the knob.
+YAW_MIN_RAD = np.deg2rad(60.0)
+
+
 def top_down(closing_xy) -> np.ndarray:
     """Top-down hand whose fingers close along the horizontal direction ``closing_xy`` (either sign: the
-    one within 90 degrees of the home closing axis -y is used)."""
+    one whose yaw is in (-120, 60] degrees, see YAW_MIN_RAD)."""
     c = np.array([closing_xy[0], closing_xy[1], 0.0])
-    if c @ np.array([0.0, -1.0, 0.0]) < 0:
+    yaw = np.arctan2(c[0], -c[1])
+    if yaw > YAW_MIN_RAD or yaw <= YAW_MIN_RAD - np.pi:
         c = -c
     return frame(-E_Z, c)
 

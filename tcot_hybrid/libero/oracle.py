@@ -84,7 +84,7 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
             dest_seen[target] = k + 1
             dest = Destination(relation=p, target=target, is_site=is_site, slot=k, slots=dest_count[target])
             places.append(PickPlace(ctx, obj, dest, g))
-            if is_site:
+            if is_site and p == "in":
                 need = _open_for(ctx, target, g)
                 if need is not None and all(s.joint != need.joint for s in opens_needed):
                     opens_needed.append(need)
@@ -110,7 +110,7 @@ def _articulated_joints(ctx: OracleContext, name: str) -> list[int]:
     out = []
     for n in names:
         j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)
-        if j >= 0 and m.jnt_type[j] in (mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE):
+        if j >= 0 and int(m.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_SLIDE), int(mujoco.mjtJoint.mjJNT_HINGE)):
             out.append(j)
     return out
 
@@ -150,7 +150,7 @@ def joint_goal(ctx: OracleContext, name: str, predicate: str, joint: int) -> tup
     nearest = int(idx[np.argmin(np.abs(qs[idx] - q_now))])
     q_edge = float(qs[nearest])
     direction = np.sign(q_edge - q_now) or 1.0
-    slide = m.jnt_type[joint] == mujoco.mjtJoint.mjJNT_SLIDE
+    slide = int(m.jnt_type[joint]) == int(mujoco.mjtJoint.mjJNT_SLIDE)
     depth, push = (SLIDE_DEPTH_M, SLIDE_PUSH_M) if slide else (HINGE_DEPTH_RAD, HINGE_PUSH_RAD)
     # the satisfying run that contains the edge: stay inside it
     run_end = nearest

@@ -126,7 +126,7 @@ class OracleContext:
             moved = subtree_bodies(m, int(m.jnt_bodyid[j]))
             dq = e.q - float(d.qpos[m.jnt_qposadr[j]])
             axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
-            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+            if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE):
                 return np.eye(3), np.zeros(3), axis * dq, moved
             return axis_angle(axis, dq), d.xanchor[j].copy(), np.zeros(3), moved
         moved = self.bodies[e.obj]
@@ -423,7 +423,7 @@ class MoveJoint(LiberoSkill):
         moving = ctx.boxes([body], effects)
         axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
         anchor = d.xanchor[j].copy()
-        if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+        if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE):
             return self._slide(world, moving, axis, q_now, effects)
         return self._hinge(world, moving, axis, anchor, q_now, effects)
 
@@ -472,23 +472,33 @@ class MoveJoint(LiberoSkill):
         return self._door(moving, anchor, sign * dq)
 
     def _knob(self, moving: Boxes, anchor, turn) -> list[Keyframe]:
-        cands = top_candidates(moving)
-        obstacles = self.ctx.obstacles([], exclude=())
-        mask = ~np.isin(obstacles.geom, moving.geom)
-        graded = score_grasps(cands, obstacles.select(mask), ground_z=self.ctx.ground_z(), kind="knob")
-        g = graded[0]
-        kfs = [kf(g.pos + np.array([0, 0, APPROACH_DZ]), False, g.rot), kf(g.pos, False, g.rot),
-               kf(g.pos, True, g.rot)]
-        n = max(2, int(np.ceil(abs(turn) / 0.25)))
+        """Turn a knob by pushing the end of its top bar along its arc with the closed fingers (no wrist
+        turn: a knob sits close to the robot's base, where turning the hand about it runs joint 7 into
+        its torque limit)."""
+        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        tops = moving.centre[:, 2] + ext[:, 2]
+        bar = tops >= tops.max() - 0.02
+        r = np.linalg.norm(moving.centre[:, :2] - anchor[:2], axis=1)
+        r[~bar] = -1.0
+        end = moving.centre[int(np.argmax(r))]
+        u = end[:2] - anchor[:2]
+        reach = float(np.linalg.norm(u))
+        u = u / reach
+        tangent = np.sign(turn) * np.array([-u[1], u[0]])  # where the bar's end moves
+        bar_half = float(np.min(ext[bar][:, :2])) if bar.any() else 0.01
+        radius = max(0.6 * (reach + float(np.max(ext[bar][:, :2]))), 0.02)
+        z = float(tops.max()) - 0.018
+        start_xy = anchor[:2] + u * radius - tangent * (bar_half + 0.011 + 0.01)
+        rot = top_down(u)  # closing axis radial: the closed fingers' flat side pushes along the tangent
+        p0 = np.array([start_xy[0], start_xy[1], z])
+        kfs = [kf(p0 + np.array([0, 0, APPROACH_DZ]), True, rot), kf(p0, True, rot)]
+        n = max(3, int(np.ceil(abs(turn) / 0.15)))
         for k in range(1, n + 1):
             Rk = rot_z(turn * k / n)
-            p = anchor + Rk @ (g.pos - anchor)
-            p[2] = g.pos[2]
-            kfs.append(kf(p, True, Rk @ g.rot))
-        Rk = rot_z(turn)
-        p = anchor + Rk @ (g.pos - anchor)
-        p[2] = g.pos[2]
-        kfs += [kf(p, False, Rk @ g.rot), kf(p + np.array([0, 0, APPROACH_DZ]), False, Rk @ g.rot)]
+            p = anchor + Rk @ (p0 - anchor)
+            p[2] = z
+            kfs.append(kf(p, True, rot))
+        kfs.append(kf(kfs[-1].pos + np.array([0, 0, APPROACH_DZ]), True, rot))
         return kfs
 
     def _door(self, moving: Boxes, anchor, turn) -> list[Keyframe]:
