@@ -76,6 +76,34 @@ class OracleContext:
         self.home_tcp = world.tcp_pos()
         self.home_rot = world.tcp_rot()
         self.skills: list["LiberoSkill"] = []
+        self.camera = getattr(getattr(task, "planner_camera", None), "name", None) or "agentview"
+
+    # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
+    def in_view(self, p, *, margin: float = 0.96) -> bool:
+        """Whether world point ``p`` projects inside the planner camera's image (``margin`` of the
+        half-angle tangent, so a little inside the border)."""
+        m, d = self.model, self.data
+        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.camera)
+        if cam < 0:
+            return True
+        R = d.cam_xmat[cam].reshape(3, 3)
+        pc = R.T @ (np.asarray(p, float) - d.cam_xpos[cam])
+        if pc[2] >= -1e-6:
+            return False
+        t = np.tan(np.deg2rad(m.cam_fovy[cam]) / 2) * margin
+        return abs(pc[0] / -pc[2]) <= t and abs(pc[1] / -pc[2]) <= t
+
+    def into_view(self, p, z_floor: float) -> np.ndarray:
+        """``p`` lowered (not below ``z_floor``) until the planner camera sees it; unchanged if it already
+        does or if no height down to the floor helps."""
+        p = np.asarray(p, float).copy()
+        if self.in_view(p):
+            return p
+        for z in np.arange(p[2] - 0.01, z_floor - 1e-9, -0.01):
+            q = np.array([p[0], p[1], z])
+            if self.in_view(q):
+                return q
+        return p
 
     # -- predictions -----------------------------------------------------------------------------------
     def effects_before(self, skill: "LiberoSkill", world: World) -> list[Effect]:
@@ -284,10 +312,12 @@ class PickPlace(LiberoSkill):
                 z -= step
             if z - z_min > 0.03 and step > 0.005:
                 pass
-            key = (round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
+            release_pt = np.array([tcp_xy[0], tcp_xy[1], z])
+            hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03])))
+            key = (hidden, round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
             if best is None or key < best[0]:
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
-                                  carry_z=carry_z, obj_below_tcp=float(-lo[2])))
+                                  carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
         out = best[1]
         out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles,
                    obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
@@ -388,13 +418,18 @@ class PickPlace(LiberoSkill):
                     kf(g_pos, True, g_rot)]
         start = world.tcp_pos() if p["held"] else g_pos
         carry_z = p["carry_z"]
-        kfs += [kf([start[0], start[1], carry_z], True, g_rot if not p["held"] else world.tcp_rot()),
-                kf([release[0], release[1], carry_z], True, R_place),
+        floor = p["carry_floor"]
+        lift = ctx.into_view([start[0], start[1], carry_z], max(floor, start[2] + 0.03))
+        over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
+        kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
+                kf(over, True, R_place),
                 kf(release + np.array([0, 0, 0.03]), True, R_place),
                 kf(release, True, R_place),
                 kf(release, False, R_place)]
-        up = max(release[2] + LIFT_M, carry_z)
-        kfs.append(kf([release[0], release[1], up], False, R_place))
+        up = ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
+        kfs.append(kf(up, False, R_place))
+        if not p["held"]:
+            kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
         return kfs
 
 
