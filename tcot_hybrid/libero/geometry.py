@@ -59,9 +59,15 @@ class Boxes:
         """(P,) bool: which points lie inside any box grown by ``margin`` [m]."""
         if len(self) == 0 or len(points) == 0:
             return np.zeros(len(points), bool)
-        d = points[:, None, :] - self.centre[None, :, :]  # (P, N, 3)
-        local = np.einsum("pni,nij->pnj", d, self.rot)
-        inside = np.all(np.abs(local) <= self.half[None] + margin, axis=2)
+        ext = np.einsum("nij,nj->ni", np.abs(self.rot), self.half) + margin
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        keep = np.all((self.centre + ext >= lo) & (self.centre - ext <= hi), axis=1)
+        if not keep.any():
+            return np.zeros(len(points), bool)
+        centre, rot, half = self.centre[keep], self.rot[keep], self.half[keep]
+        d = points[:, None, :] - centre[None, :, :]  # (P, N, 3)
+        local = np.einsum("pni,nij->pnj", d, rot)
+        inside = np.all(np.abs(local) <= half[None] + margin, axis=2)
         return inside.any(axis=1)
 
 

@@ -172,10 +172,13 @@ class OracleContext:
         return self.boxes(self.bodies[name], effects)
 
     def ground_z(self) -> float:
-        """Lowest resting surface: no hand point may go below it."""
-        lows = [self.object_boxes(n, []).aabb()[0][2] for n in self.task.scene.env.objects_dict
-                if n in self.bodies and len(self.object_boxes(n, [])) > 0]
-        return min(lows) - 0.002 if lows else 0.0
+        """Lowest resting surface: no hand point may go below it (cached per simulation time)."""
+        t = float(self.data.time)
+        if getattr(self, "_ground", (None,))[0] != t:
+            lows = [self.object_boxes(n, []).aabb()[0][2] for n in self.task.scene.env.objects_dict
+                    if n in self.bodies and len(self.object_boxes(n, [])) > 0]
+            self._ground = (t, min(lows) - 0.002 if lows else 0.0)
+        return self._ground[1]
 
     def clear_z(self, a_xy, b_xy, obstacles: Boxes, radius: float) -> float:
         """Height of the highest obstacle top within ``radius`` of the segment a->b (xy)."""
@@ -269,6 +272,17 @@ class PickPlace(LiberoSkill):
         return graded[0]
 
     def _plan(self, world: World) -> dict:
+        """Grasp, release pose and carry height, from the world now (cached per simulation time: the planner
+        and every later step's prediction ask for it at the same instant)."""
+        t = float(self.ctx.data.time)
+        cached = getattr(self, "_plan_cache", None)
+        if cached is not None and cached[0] == t:
+            return cached[1]
+        out = self._plan_now(world)
+        self._plan_cache = (t, out)
+        return out
+
+    def _plan_now(self, world: World) -> dict:
         ctx = self.ctx
         effects = ctx.effects_before(self, world)
         held = world.is_held(self.obj)
@@ -302,16 +316,17 @@ class PickPlace(LiberoSkill):
             z_min = support + RELEASE_GAP_M - lo[2]
             top = ctx.clear_z(start, tcp_xy, obstacles, radius=0.08)
             carry_z = max(top + TRAVEL_CLEARANCE_M - lo[2], start[2] + LIFT_M, z_min + 0.06)
+            def blocked(z):
+                tcp = np.array([tcp_xy[0], tcp_xy[1], z])
+                return bool(near.contains(hand_points(tcp, R_place, closed=True), margin=0.003).any()
+                            or self._boxes_hit(carried(tcp), near))
+
             z = carry_z
-            step = 0.01
-            while z - step >= z_min - 1e-9:
-                tcp = np.array([tcp_xy[0], tcp_xy[1], z - step])
-                if near.contains(hand_points(tcp, R_place, closed=True), margin=0.003).any() or \
-                        self._boxes_hit(carried(tcp), near):
-                    break
-                z -= step
-            if z - z_min > 0.03 and step > 0.005:
-                pass
+            for step in (0.03, 0.005):  # coarse, then fine
+                while z - step >= z_min - 1e-9 and not blocked(z - step):
+                    z -= step
+            if z - 0.005 < z_min and z > z_min and not blocked(z_min):
+                z = z_min
             release_pt = np.array([tcp_xy[0], tcp_xy[1], z])
             hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03])))
             key = (hidden, round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
@@ -397,11 +412,11 @@ class PickPlace(LiberoSkill):
                 best, best_yaw = fit, yaw
         base = self._slot_offset(half)
         offsets = [base]
-        if self.dest.slots == 1:
-            for fx in (-0.6, 0.0, 0.6):
-                for fy in (-0.6, 0.0, 0.6):
-                    if fx or fy:
-                        offsets.append(np.array([fx * half[0], fy * half[1]]))
+        f = 0.6 if self.dest.slots == 1 else 0.5 / self.dest.slots
+        for fx in (-f, 0.0, f):
+            for fy in (-f, 0.0, f):
+                if fx or fy:
+                    offsets.append(base + np.array([fx * half[0], fy * half[1]]))
         for off in offsets:
             yield centre[:2] + R[:2, :2] @ off, best_yaw
 
