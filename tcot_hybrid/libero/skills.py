@@ -79,7 +79,7 @@ class OracleContext:
         self.camera = getattr(getattr(task, "planner_camera", None), "name", None) or "agentview"
 
     # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
-    def in_view(self, p, *, margin: float = 0.96) -> bool:
+    def in_view(self, p, *, margin: float = 0.9) -> bool:
         """Whether world point ``p`` projects inside the planner camera's image (``margin`` of the
         half-angle tangent, so a little inside the border)."""
         m, d = self.model, self.data
