@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup libero demo test bench planner clean
+.PHONY: setup libero demo test bench planner libero-oracle-eval clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -71,6 +71,19 @@ planner: setup
 	# round 8, shipped: round 6 retrained on event-spaced global windows
 	$(BIN)/tcot train --config examples/configs/train_stage2_round8.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
+
+# The LIBERO oracle in the paper's protocol (docs/libero.md): all 50 shipped init states of the four suites'
+# 40 tasks; sampled layouts on the reporting seeds (docs/seeds.md); every controller and both IK backends on
+# libero_spatial and libero_10 (10 init states per task).
+LIBERO_SUITES := libero_spatial,libero_object,libero_goal,libero_10
+libero-oracle-eval: setup
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init shipped --episodes 50 --seed-start 0 \
+		--workers 2 --out docs/eval-libero/oracle-shipped --readme README.md
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init sampled --episodes 10 --seed-start 90000 \
+		--workers 2 --out docs/eval-libero/oracle-sampled --readme README.md
+	$(BIN)/tcot eval --suite libero_spatial,libero_10 --planners oracle --init shipped --episodes 10 --seed-start 0 \
+		--controllers computed_torque,joint_pd,osc,mpc --iks mink,pinocchio --workers 2 \
+		--out docs/eval-libero/controllers-ik --readme README.md
 
 clean:
 	rm -rf runs .pytest_cache

@@ -220,7 +220,8 @@ class EvalCommand:
     config: Path | None = None
     """YAML/TOML/JSON file with RunConfig fields shared by every episode."""
     suite: str | None = None
-    """Evaluate every task of this suite (default: the workcell's suites); LIBERO suites too, e.g. libero_10."""
+    """Evaluate every task of these comma-separated suites (default: the workcell's suites); LIBERO suites
+    too, e.g. libero_spatial,libero_object,libero_goal,libero_10."""
     tasks: str | None = None
     """Comma-separated task names (instead of --suite)."""
     planners: str | None = None
@@ -265,7 +266,7 @@ def cmd_eval(argv: list[str]) -> int:
     if cmd.suite and cmd.tasks:
         raise ConfigError("give --suite or --tasks, not both")
     all_tasks = list_tasks()
-    tasks = (suite_task_names(cmd.suite) if cmd.suite else
+    tasks = ([name for suite in _split(cmd.suite, "") for name in suite_task_names(suite)] if cmd.suite else
              _split(cmd.tasks, ",".join(t.name for t in all_tasks)))
     if cmd.episodes < 1 or cmd.workers < 1 or cmd.seed_start < 0:
         raise ConfigError(f"--episodes and --workers must be >= 1 and --seed-start >= 0; got "

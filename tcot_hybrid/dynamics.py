@@ -52,10 +52,17 @@ class MujocoArmDynamics:
     otherwise scale or clamp the commanded torque silently).
     """
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, spec) -> None:
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, spec, *,
+                 T_base_world: np.ndarray | None = None) -> None:
+        """``T_base_world`` (4x4, default identity) maps the scene's world frame into the robot's base frame,
+        the frame ``ee_pose``/``ee_jacobian`` report in (the frame Pinocchio's model of the robot lives in;
+        LIBERO's robot sits at e.g. (-0.66, 0, 0.912) in its world)."""
         self.model = model
         self.data = data
         self.spec = spec
+        T = np.eye(4) if T_base_world is None else np.asarray(T_base_world, dtype=float)
+        self._R_bw, self._p_bw = T[:3, :3].copy(), T[:3, 3].copy()
+        self._base_is_world = bool(np.array_equal(T, np.eye(4)))
         joints = tuple(spec.arm_joints)
         actuators = tuple(spec.arm_actuators)
         if len(joints) != len(actuators) or not joints:
@@ -188,7 +195,7 @@ class MujocoArmDynamics:
         self.tick += 1
 
     def ee_jacobian(self) -> np.ndarray:
-        """(6, n) world-frame Jacobian of the TCP site: rows 0-2 linear [m/rad], 3-5 angular [rad/rad]."""
+        """(6, n) base-frame Jacobian of the TCP site: rows 0-2 linear [m/rad], 3-5 angular [rad/rad]."""
         if self._jac_tick != self.tick:
             mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self.ee_site_id)
             if self._dsl is not None:
@@ -197,15 +204,21 @@ class MujocoArmDynamics:
             else:
                 self._J[:3] = self._jacp[:, self.dof_adr]
                 self._J[3:] = self._jacr[:, self.dof_adr]
+            if not self._base_is_world:
+                self._J[:3] = self._R_bw @ self._J[:3]
+                self._J[3:] = self._R_bw @ self._J[3:]
             self._jac_tick = self.tick
         return self._J_ro
 
     def ee_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """TCP position [m] (3,) and rotation matrix (3, 3) in the world frame."""
+        """TCP position [m] (3,) and rotation matrix (3, 3) in the robot's base frame (= world in the workcell)."""
         if self._pose_tick != self.tick:
             sid = self.ee_site_id
             self._pos[:] = self.data.site_xpos[sid]
             self._rot.ravel()[:] = self.data.site_xmat[sid]
+            if not self._base_is_world:
+                self._pos[:] = self._R_bw @ self._pos + self._p_bw
+                self._rot[:] = self._R_bw @ self._rot
             self._pose_tick = self.tick
         return self._pos_ro, self._rot_ro
 

@@ -59,7 +59,13 @@ def validate_names(cfg: RunConfig) -> None:
     from tcot_hybrid.errors import ControllerError, unknown_name
     from tcot_hybrid.ik.base import check_ik_options, ik_backend, joint_bounds
 
-    make_task(cfg.task).set_episode(seed=cfg.seed, init=cfg.init)  # e.g. --init shipped on a workcell task
+    task = make_task(cfg.task)
+    task.set_episode(seed=cfg.seed, init=cfg.init)  # e.g. --init shipped on a workcell task
+    if cfg.scene.planner_camera not in task.cameras():
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(f"scene.planner_camera = {cfg.scene.planner_camera!r} is not a camera of task "
+                          f"{cfg.task!r}'s scene; choose one of {', '.join(task.cameras())}")
     robot = load_robot_spec(cfg.robot)
     if cfg.controller not in list_controllers():
         raise ControllerError(unknown_name("controller", cfg.controller, list_controllers()))
@@ -85,7 +91,7 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     sim.reset(np.random.default_rng(cfg.seed))
     px = cfg.scene.planner_image_px
     camera = CameraModel.from_mujoco(sim.model, sim.data, cfg.scene.planner_camera, width=px, height=px)
-    dyn = MujocoArmDynamics(sim.model, sim.data, robot)
+    dyn = MujocoArmDynamics(sim.model, sim.data, robot, T_base_world=sim.T_base_world)
     smoother = JointSmoother.from_spec(robot, ctrl_dt=cfg.timing.ctrl_dt, config=cfg.smoothing)
     smoother.reset(sim.q)
     controller = make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt,

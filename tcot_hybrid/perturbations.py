@@ -157,7 +157,7 @@ class ObjectDrop(Perturbation):
         sim = runner.stack.sim
         world = sim.world
         held = [n for n in world.objects if world.is_grasped(n)]
-        if not held or sim.tcp_pos()[2] < 0.08:
+        if not held or sim.tcp_pos()[2] - sim.support_z < 0.08:  # low over the support: a drop is a place
             return None
         closed_cmd = sim.gripper_closed_cmd()
         sim.set_gripper(False)

@@ -30,6 +30,8 @@ SEP = ":"
 # a learned policy trained on human teleoperation, so these are longer (what each episode took is recorded).
 TIME_LIMIT_S = {"libero_spatial": 30.0, "libero_object": 30.0, "libero_goal": 30.0, "libero_10": 60.0}
 DEFAULT_TIME_LIMIT_S = 60.0
+# The cameras robosuite 1.4 puts in every LIBERO scene (agentview is the paper's planner camera).
+CAMERAS = ("agentview", "frontview", "birdview", "sideview", "galleryview", "robot0_robotview", "robot0_eye_in_hand")
 SETTLE_S = 1.0  # [s] LIBERO's init states hold objects a few mm above their supports: let them land
 
 
@@ -144,6 +146,9 @@ class LiberoTask(Task):
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
                                            int(mujoco.mjtRndFlag.mjRND_REFLECTION)))
+
+    def cameras(self) -> tuple[str, ...]:
+        return CAMERAS
 
     def release_scene(self) -> None:
         if self.scene is not None:

@@ -298,6 +298,12 @@ class Task(ABC):
 
         return build_workcell_scene(robot, self.add_objects, config=scene, sim_dt=timing.sim_dt)
 
+    def cameras(self) -> tuple[str, ...]:
+        """Camera names the task's scene has (checked before anything is built)."""
+        from tcot_hybrid.scene import CAMERAS
+
+        return tuple(CAMERAS)
+
     def release_scene(self) -> None:
         """The simulation built from ``build_scene`` is closed (a LIBERO task keeps its scene for reuse)."""
 

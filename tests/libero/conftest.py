@@ -18,5 +18,10 @@ def libero_runner():
 
 
 @pytest.fixture
+def spatial_task():
+    return SPATIAL_TASK
+
+
+@pytest.fixture
 def rng():
     return np.random.default_rng(7)
