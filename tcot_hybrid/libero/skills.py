@@ -76,22 +76,24 @@ class OracleContext:
         self.home_tcp = world.tcp_pos()
         self.home_rot = world.tcp_rot()
         self.skills: list["LiberoSkill"] = []
-        self.camera = getattr(getattr(task, "planner_camera", None), "name", None) or "agentview"
+        self.camera = getattr(task, "planner_camera", None) or "agentview"
+        self.image_px = int(getattr(task, "planner_image_px", None) or 128)
+        self._camera_model = None
 
     # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
-    def in_view(self, p, *, margin: float = 0.9) -> bool:
-        """Whether world point ``p`` projects inside the planner camera's image (``margin`` of the
-        half-angle tangent, so a little inside the border)."""
-        m, d = self.model, self.data
-        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.camera)
-        if cam < 0:
-            return True
-        R = d.cam_xmat[cam].reshape(3, 3)
-        pc = R.T @ (np.asarray(p, float) - d.cam_xpos[cam])
-        if pc[2] >= -1e-6:
-            return False
-        t = np.tan(np.deg2rad(m.cam_fovy[cam]) / 2) * margin
-        return abs(pc[0] / -pc[2]) <= t and abs(pc[1] / -pc[2]) <= t
+    def in_view(self, p, *, margin_px: float = 2.0) -> bool:
+        """Whether world point ``p`` projects inside the planner camera's image, ``margin_px`` from its border
+        (the same camera model the planner projects plans with)."""
+        if self._camera_model is None:
+            from tcot_hybrid.camera import CameraModel
+
+            m = self.model
+            if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.camera) < 0:
+                return True
+            self._camera_model = CameraModel.from_mujoco(m, self.data, self.camera, width=self.image_px,
+                                                         height=self.image_px)
+        uv, depth = self._camera_model.project(np.asarray(p, float)[None])
+        return bool(depth[0] > 0 and self._camera_model.in_image(uv, margin_px=margin_px)[0])
 
     def into_view(self, p, z_floor: float) -> np.ndarray:
         """``p`` lowered (not below ``z_floor``) until the planner camera sees it; unchanged if it already
