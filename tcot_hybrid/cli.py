@@ -207,7 +207,26 @@ def cmd_run(argv: list[str]) -> int:
           f"ik={record['ik']} planner={record['planner']}: {'SUCCESS' if record['success'] else 'failure'} "
           f"in {record['sim_time_s']:.1f}s sim / {record['wall_time_s']:.1f}s wall, "
           f"{len(record['events'])} events -> {path}" + (f", video {cmd.video}" if cmd.video else ""))
+    for line in run_notes(record):
+        print(line)
     return 0
+
+
+def run_notes(record: dict) -> list[str]:
+    """What a reader of one episode's summary must not miss: a perturbation that did not fire (and why), how a
+    detector-stopped episode ended."""
+    notes = []
+    if record.get("perturbation_fired") is False:
+        notes.append(f"perturbation {record['perturb']} did NOT fire: {record.get('perturbation_note')}; "
+                     f"this episode is not a perturbed one")
+    elif record.get("perturbation_fired"):
+        step = next((e.get("step") for e in record.get("events", []) if e.get("kind") == "perturbation"), None)
+        notes.append(f"perturbation {record['perturb']} fired at planner step {step}")
+    if record.get("stop_on") == "detector":
+        notes.append(f"stopped by {record.get('stopped_by')}; the success predicate on the final state says "
+                     f"{'success' if record['success'] else 'failure'}"
+                     + (" (premature stop)" if record.get("premature_stop") else ""))
+    return notes
 
 
 # --- tcot eval ----------------------------------------------------------------------------------------
@@ -294,6 +313,16 @@ def cmd_eval(argv: list[str]) -> int:
     tot = sum(c["successes"] for c in result["cells"])
     print(f"{tot}/{result['episodes']} episodes succeeded across {len(result['cells'])} cells in "
           f"{result['wall_time_s']:.1f}s with {cmd.workers} workers -> {cmd.out / 'eval.json'}")
+    if cmd.cfg.stop_on == "detector":
+        print(f"stopped by the detector: premature stops {sum(c['premature_stops'] for c in result['cells'])} "
+              f"of {result['episodes']} episodes")
+    for planner, d in (result.get("detector") or {}).items():
+        print(f"detector ({planner}): AUROC in-episode {d['in_episode_auroc']} over {d['in_episode_frames']} frames; "
+              f"with post-success probes {d['auroc']} over {d['calls']}")
+    from tcot_hybrid.evaluation.reports import perturbation_notes
+
+    for line in perturbation_notes(result["cells"]):
+        print("perturbation " + line[2:])
     return 0
 
 

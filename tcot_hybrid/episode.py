@@ -102,7 +102,8 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
                               dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
     ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint})
-    planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx)
+    # planner_factory (e.g. label replay) is not privileged: it sees what a learned planner sees
+    planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx.observation_only())
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)
 
 
@@ -119,9 +120,17 @@ class EpisodeRunner:
         self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
         self.pre_step_hook = pre_step_hook  # called at the start of every planner step, before planning
         self.supervisor = Supervisor(cfg.supervisor, self.stack.planner)
+        if cfg.stop_on == "detector" and not self.stack.planner.has_detector:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"stop_on = 'detector' needs a planner with a failure detector; planner "
+                              f"{cfg.planner!r} has none (use stop_on = 'simulator', or a learned planner)")
         self.perturbation = make_perturbation(cfg.perturb, cfg.seed)
+        self.perturbation_note = self._perturbation_note()
         self.steps = 0
         self.success = False
+        self.stopped_by: str | None = None  # simulator | detector | time_limit | fault
+        self._stop_hold = 0
         self.fault: str | None = None
         self.plans: list = []
         self._obs: tuple[int, Observation] | None = None
@@ -143,6 +152,10 @@ class EpisodeRunner:
         self._obs = (step, obs)
         return obs
 
+    def invalidate_observation(self) -> None:
+        """The scene changed within this step (e.g. a perturbation moved the camera): render afresh."""
+        self._obs = None
+
     def settle(self) -> None:
         ex = self.stack.executor
         for _ in range(round(self.stack.task.settle_s / self.cfg.timing.ctrl_dt)):
@@ -160,7 +173,7 @@ class EpisodeRunner:
         s, ex = self.stack, self.stack.executor
         if self.pre_step_hook is not None:
             self.pre_step_hook(self, step)
-        if self.perturbation is not None:
+        if self.perturbation is not None and self.perturbation_note is None:  # one that cannot apply never fires
             ev = self.perturbation.on_step(self, step)
             if ev is not None:
                 ex.event(**ev)
@@ -199,14 +212,42 @@ class EpisodeRunner:
         if ex.set_plan(plan):
             self.plans.append(plan)
 
+    @property
+    def max_steps(self) -> int:
+        """Planner steps in the task's time limit."""
+        return int(round(self.stack.task.time_limit_s / self.cfg.timing.plan_dt))
+
+    def _perturbation_note(self) -> str | None:
+        """Why the episode's perturbation can never fire (None when it can, or there is none)."""
+        if self.perturbation is None:
+            return None
+        return self.perturbation.cannot_apply(self.stack.task, self.stack.planner, self.max_steps - 1)
+
+    def _detector_stop(self, step: int) -> bool:
+        """stop_on = detector: ask the failure detector on the observation at ``step`` (from supervisor.t_f on);
+        True once it has judged the task successful on ``stop_hold_steps`` consecutive calls. The predicate is
+        logged beside each call (``true_success``) for the detector's figures, never used to stop."""
+        s, cfg = self.stack, self.cfg
+        if step < cfg.supervisor.t_f:
+            return False
+        p, rejected = self.supervisor.detect(lambda: self.observe(step))
+        ok = rejected is None and p >= cfg.supervisor.success_threshold
+        self._stop_hold = self._stop_hold + 1 if ok else 0
+        s.executor.event("stop_check", step=step, p_success=round(float(p), 4), hold=self._stop_hold,
+                         true_success=bool(s.task.success(s.sim.world)), **({"rejected": rejected} if rejected else {}))
+        return self._stop_hold >= cfg.stop_hold_steps
+
     def run(self, progress=None, *, steps_after_success: int = 0, probe_detector: bool = False) -> dict:
-        """Run until success, the task's time limit or a fault. ``steps_after_success`` keeps stepping
-        (the arm holds its last plan) a few planner steps past success, e.g. to record success frames;
-        with ``probe_detector`` the planner's failure detector is asked at each of those steps (its
-        false-alarm rate is measured on them)."""
+        """Run until the episode ends: the task's success predicate holds (``stop_on`` simulator) or the failure
+        detector says so (``stop_on`` detector; success is then the predicate on the final state), the time
+        limit, or a fault. ``steps_after_success`` keeps stepping (the arm holds its last plan) a few planner
+        steps past a simulator-judged success, e.g. to record success frames; with ``probe_detector`` the
+        planner's failure detector is asked at each of those steps (its false-alarm rate is measured on them)."""
         s, cfg = self.stack, self.cfg
         t0 = time.perf_counter()
-        max_steps = int(round(s.task.time_limit_s / cfg.timing.plan_dt))
+        max_steps = self.max_steps
+        self.perturbation_note = self._perturbation_note()  # the time limit may have been changed since __init__
+        by_detector = cfg.stop_on == "detector"
         self.settle()
         step = 0
         try:
@@ -220,12 +261,22 @@ class EpisodeRunner:
                 if s.sim.fault is not None:
                     self.fault = f"sim_fault:{s.sim.fault.warning}"
                     s.executor.event("sim_fault", warning=s.sim.fault.warning, count=s.sim.fault.count)
+                    self.stopped_by = "fault"
                     break
-                if s.task.success(s.sim.world):
+                if by_detector:
+                    if step < max_steps and self._detector_stop(step):
+                        self.stopped_by = "detector"
+                        break
+                elif s.task.success(s.sim.world):
                     self.success = True
+                    self.stopped_by = "simulator"
                     break
+            if self.stopped_by is None:
+                self.stopped_by = "time_limit"
+            if by_detector and self.fault is None:
+                self.success = bool(s.task.success(s.sim.world))  # judged afterwards, on the state it stopped in
             self.success_time_s = float(s.sim.data.time) if self.success else None
-            for _ in range(steps_after_success if self.success else 0):
+            for _ in range(steps_after_success if self.success and not by_detector else 0):
                 if probe_detector:
                     p = s.planner.success_probability(self.observe(step))
                     s.executor.event("detector", step=step, p_success=round(float(p), 4),
@@ -236,8 +287,22 @@ class EpisodeRunner:
                 self.pre_step_hook(self, step)
         except SimulationError as exc:
             self.fault = f"sim_fault:{exc}"
+            self.stopped_by = "fault"
+        finally:
+            if self.perturbation is not None:
+                self.perturbation.undo(self)
         wall = time.perf_counter() - t0
         return self.record(wall)
+
+    def perturbation_summary(self) -> dict:
+        """Whether the episode's perturbation fired (None without one) and, if it did not, why."""
+        pert = self.perturbation
+        if pert is None:
+            return {"perturbation_fired": None, "perturbation_note": None}
+        note = None
+        if not pert.fired:
+            note = self.perturbation_note or "its condition never held in this episode"
+        return {"perturbation_fired": bool(pert.fired), "perturbation_note": note}
 
     def record(self, wall_time_s: float) -> dict:
         s, cfg = self.stack, self.cfg
@@ -252,6 +317,9 @@ class EpisodeRunner:
             "success_time_s": self.success_time_s if success else None,
             "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
             "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
+            **self.perturbation_summary(),
+            "stop_on": cfg.stop_on, "stopped_by": self.stopped_by,
+            "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_velocity_ratio": float(ex.max_velocity_ratio),

@@ -276,6 +276,14 @@ class MotionExecutor:
         self.controller.reset(self.dyn, self._last_tau)
         self.event("scene_reset")
 
+    def resync_to_measured(self, reason: str) -> None:
+        """The arm was moved from outside (e.g. a perturbed initial posture): restart the reference, the IK seed
+        and the controller from the measured state, keeping the plan."""
+        self.smoother.reset(self.sim.q)
+        self._ik_seed = self.sim.q
+        self.controller.reset(self.dyn, self._last_tau)
+        self.event("reference_resynced", reason=reason)
+
     @property
     def plan_finished(self) -> bool:
         return self.phase in ("done", "idle")

@@ -78,8 +78,21 @@ class Perturbation(ABC):
     def fire(self, runner, step: int) -> dict | None:  # noqa: ARG002 - image-only perturbations
         return None
 
+    def cannot_apply(self, task, planner, last_step: int) -> str | None:
+        """Why this perturbation can never fire in an episode of ``task`` with ``planner`` whose last planner
+        step is ``last_step``; None when it can (whether it does depends on the episode). Subclasses add
+        their own reasons to this one."""
+        if self.at_step > last_step:
+            return (f"at_step {self.at_step} is after the episode's last planner step {last_step} "
+                    f"({task.name}: time limit {task.time_limit_s} s)")
+        return None
+
     def on_image(self, image: np.ndarray) -> np.ndarray:
         return image
+
+    def undo(self, runner) -> None:  # noqa: ARG002 - most perturbations change only the episode's state
+        """Put back what the perturbation changed in the model (not the state): called when the episode ends,
+        because a model outlives its episode (LIBERO scenes are reused by the next episode of the task)."""
 
 
 def _first_open_skill(runner):
@@ -139,6 +152,11 @@ class TargetMoved(Perturbation):
     default_strength = 0.10
     default_at_step = 5
 
+    def cannot_apply(self, task, planner, last_step):
+        if all(skill.target is None for skill in task.skills()):
+            return f"task {task.name} has no target receptacle (none of its skills places onto or into something)"
+        return super().cannot_apply(task, planner, last_step)
+
     def fire(self, runner, step):
         skill = _first_open_skill(runner)
         if skill is None or skill.target is None:
@@ -175,6 +193,13 @@ class OffCentreGrasp(Perturbation):
     unit = "m"
     default_strength = 0.025
     default_at_step = 1
+
+    def cannot_apply(self, task, planner, last_step):
+        from tcot_hybrid.tasks.base import PickPlace
+
+        if not any(isinstance(s, PickPlace) for s in task.skills()):  # fire() also checks the object's kind
+            return f"task {task.name} has no top-down pick-and-place (the grasp it nudges)"
+        return super().cannot_apply(task, planner, last_step)
 
     def fire(self, runner, step):
         sim = runner.stack.sim
@@ -217,6 +242,11 @@ class CameraNoise(Perturbation):
     default_strength = 12.0
     default_at_step = 0
 
+    def cannot_apply(self, task, planner, last_step):
+        if not planner.needs_image:
+            return f"planner {planner.name!r} does not look at the image"
+        return super().cannot_apply(task, planner, last_step)
+
     def fire(self, runner, step):
         return {"sigma": self.strength}
 
@@ -231,9 +261,88 @@ class CameraNoise(Perturbation):
         return np.clip(noisy, 0, 255).astype(np.uint8)
 
 
+def _random_unit(rng) -> np.ndarray:
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+class CameraShift(Perturbation):
+    """The planner camera is bumped before the episode: it moves ``strength`` metres in a random direction and
+    turns ``CAMERA_SHIFT_DEG_PER_M * strength`` degrees about a random axis, while the calibration the lift
+    uses stays the nominal one (LIBERO-Plus's camera shift; a fixed camera knocked after calibration)."""
+
+    name = "camera_shift"
+    description = "the planner camera moves a few cm and degrees; the lift keeps the nominal calibration"
+    unit = "m (and 100 deg per m of turn)"
+    default_strength = 0.03
+    default_at_step = 0
+    CAMERA_SHIFT_DEG_PER_M = 100.0
+
+    def __init__(self, config, seed):
+        super().__init__(config, seed)
+        self._saved = None
+
+    def cannot_apply(self, task, planner, last_step):
+        if not planner.needs_image:
+            return f"planner {planner.name!r} does not look at the image"
+        return super().cannot_apply(task, planner, last_step)
+
+    def fire(self, runner, step):
+        sim, name = runner.stack.sim, runner.cfg.scene.planner_camera
+        m = sim.model
+        cid = m.camera(name).id
+        self._saved = (cid, m.cam_pos[cid].copy(), m.cam_quat[cid].copy())
+        shift = _random_unit(self.rng) * self.strength
+        angle = np.deg2rad(self.CAMERA_SHIFT_DEG_PER_M * self.strength)
+        turn = np.zeros(4)
+        mujoco.mju_axisAngle2Quat(turn, _random_unit(self.rng), angle)
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, turn, m.cam_quat[cid])  # turned in the camera's parent frame
+        m.cam_pos[cid] += shift
+        m.cam_quat[cid] = quat
+        runner.invalidate_observation()
+        return {"camera": name, "moved_m": np.round(shift, 4).tolist(), "turned_deg": round(float(np.rad2deg(angle)), 2)}
+
+    def undo(self, runner):
+        if self._saved is not None:
+            cid, pos, quat = self._saved
+            runner.stack.sim.model.cam_pos[cid] = pos
+            runner.stack.sim.model.cam_quat[cid] = quat
+            self._saved = None
+
+
+class InitPosture(Perturbation):
+    """The arm starts away from its nominal initial posture: every joint offset by up to ``strength`` rad (random
+    signs, inside the joint limits), before the first plan (LIBERO-Plus's robot initial-state shift)."""
+
+    name = "init_posture"
+    description = "the robot starts from a perturbed joint posture (each joint off by up to strength rad)"
+    unit = "rad"
+    default_strength = 0.2
+    default_at_step = 0
+
+    def fire(self, runner, step):
+        sim, ex = runner.stack.sim, runner.stack.executor
+        spec = sim.robot
+        margin = 0.05
+        q0 = sim.q
+        for _ in range(100):
+            q = q0 + self.rng.uniform(-self.strength, self.strength, size=spec.dof)
+            if np.all(q > spec.q_min + margin) and np.all(q < spec.q_max - margin):
+                break
+        else:
+            return None  # no offset of this size fits inside the limits here: did not fire
+        sim.data.qpos[sim.arm_qpos] = q
+        sim.data.qvel[sim.arm_dof] = 0.0
+        ex.resync_to_measured("init_posture")
+        runner.invalidate_observation()
+        return {"offset_rad": np.round(q - q0, 4).tolist()}
+
+
 # Order matters: the first three are the failure modes a frozen global plan cannot survive.
 _REGISTRY: dict[str, type[Perturbation]] = {
-    c.name: c for c in (ObjectMoved, TargetMoved, ObjectDrop, OffCentreGrasp, ArmPush, CameraNoise)
+    c.name: c for c in (ObjectMoved, TargetMoved, ObjectDrop, OffCentreGrasp, ArmPush, CameraNoise, CameraShift,
+                        InitPosture)
 }
 
 

@@ -110,7 +110,7 @@ class Supervisor:
         frozen = self.state == "global_follow" and step <= cfg.t_f and not executor.plan_finished
         if frozen and geometric is None:
             return Decision(None, False, None)
-        p, rejected = self._detect(observe)
+        p, rejected = self.detect(observe)
         successful = (not rejected) and p >= cfg.success_threshold
         if self.state == "global_follow":
             self.state = "detect"
@@ -127,9 +127,10 @@ class Supervisor:
             return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
         return Decision(None, False, self._event(step, p=p))
 
-    def _detect(self, observe) -> tuple[float, str | None]:
-        """The detector's p(success); an unusable answer (error, NaN, outside [0, 1]) counts as a failed
-        detection, i.e. not successful, so the robot replans rather than trusting it."""
+    def detect(self, observe) -> tuple[float, str | None]:
+        """The detector's p(success) on ``observe()`` and why it was rejected (None if usable); an unusable
+        answer (error, NaN, outside [0, 1]) counts as a failed detection, i.e. not successful, so the robot
+        replans (or keeps going) rather than trusting it."""
         from tcot_hybrid.errors import PlanningError
 
         try:

@@ -3,8 +3,9 @@ import math
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.evaluation import (aggregate, auroc, detector_metrics, evaluate, longest_first, make_jobs, parse_sweep,
-                                    with_field)
+from tcot_hybrid.evaluation import (aggregate, auroc, detector_metrics, evaluate, longest_first, make_jobs, markdown,
+                                    parse_sweep, with_field)
+from tcot_hybrid.metrics import wilson_interval
 from tcot_hybrid.run_config import RunConfig
 
 
@@ -46,8 +47,61 @@ def test_aggregate_and_detector_metrics():
     (cell,) = aggregate(recs)
     assert cell["episodes"] == 4 and cell["successes"] == 2
     assert math.isclose(cell["stderr"], math.sqrt(0.25 / 4))
+    assert cell["ci95"] == [round(x, 4) for x in wilson_interval(2, 4)]
+    assert cell["perturbation_fired"] is None and cell["premature_stops"] == 0
     det = detector_metrics(recs)["learned"]
     assert det["calls"] == 8 and det["false_alarm_rate"] == 0.5
+    assert det["in_episode_frames"] == 4 and det["in_episode_auroc"] is None  # all in-episode frames negative
+
+
+def test_wilson_interval():
+    lo, hi = wilson_interval(5, 5)
+    assert round(lo, 3) == 0.566 and hi == 1.0  # "1.00 ± 0.00" at n = 5 was really [0.57, 1.00]
+    lo, hi = wilson_interval(0, 20)
+    assert lo == 0.0 and round(hi, 3) == 0.161
+    lo, hi = wilson_interval(9, 10)
+    assert round(lo, 3) == 0.596 and round(hi, 3) == 0.982
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="successes"):
+        wilson_interval(6, 5)
+
+
+def _rec(i, **kw):
+    base = dict(task="goal_open_drawer", suite="goal", planner="oracle", mode="global", perturb="target_moved",
+                robot="panda", controller="c", ik="mink", sweep="-", seed=i, success=True, events=[])
+    return {**base, **kw}
+
+
+def test_never_fired_perturbations_are_marked_not_reported_as_perturbed_success():
+    note = "task goal_open_drawer has no target receptacle"
+    recs = [_rec(i, perturbation_fired=False, perturbation_note=note) for i in range(3)]
+    recs += [_rec(i, task="goal_cube_in_bowl", perturbation_fired=i > 0, perturbation_note=None if i else "x")
+             for i in range(3)]
+    cells = {c["task"]: c for c in aggregate(recs)}
+    assert cells["goal_open_drawer"]["perturbation_fired"] == 0
+    assert cells["goal_open_drawer"]["perturbation_notes"] == [note]
+    assert cells["goal_cube_in_bowl"]["perturbation_fired"] == 2
+    md = markdown({"cells": list(cells.values())})
+    row = next(line for line in md.splitlines() if line.startswith("| goal_open_drawer |"))
+    assert "not fired (n=3)" in row and "1.00 [" not in row
+    assert f"`target_moved` on `goal_open_drawer`: fired in 0 of 3 episodes ({note})" in md
+    assert "`target_moved` on `goal_cube_in_bowl`: fired in 2 of 3 episodes (x)" in md
+    assert "| target_moved | oracle (global) | 1.000 | [0.610, 1.000] | 6 | 2/6 |" in md  # pooled: fired in some
+
+
+def test_in_episode_auroc_counts_each_step_once():
+    ev = lambda kind, step, p, y: {"kind": kind, "step": step, "p_success": p, "true_success": y}  # noqa: E731
+    recs = [_rec(0, planner="learned", mode="glsr", perturb="none", stop_on="detector", premature_stop=False, events=[
+        ev("supervisor", 16, 0.1, False), ev("stop_check", 16, 0.1, False),  # same frame, asked twice
+        ev("supervisor", 17, 0.2, False), ev("stop_check", 18, 0.9, True), ev("stop_check", 19, 0.95, True)]),
+        _rec(1, planner="learned", mode="glsr", perturb="none", stop_on="detector", premature_stop=True,
+             success=False, events=[ev("stop_check", 16, 0.8, False)])]
+    det = detector_metrics(recs)["learned"]
+    assert det["in_episode_frames"] == 5 and det["in_episode_positives"] == 2
+    assert det["in_episode_auroc"] == 1.0 and det["calls"] == 5
+    (cell,) = aggregate(recs)
+    assert cell["premature_stops"] == 1 and cell["stop_on"] == "detector"
+    assert "premature stops" in markdown({"cells": [cell], "detector": detector_metrics(recs)})
 
 
 def test_evaluate_resumes(tmp_path):

@@ -15,7 +15,7 @@ from tcot_hybrid.errors import CheckpointError, LiftError, PlanningError  # noqa
 from tcot_hybrid.learning.checkpoint import camera_meta, load_checkpoint, save_checkpoint, versions  # noqa: E402
 from tcot_hybrid.learning.model import ModelConfig, PlannerNet  # noqa: E402
 from tcot_hybrid.learning.vocab import Vocabulary, words  # noqa: E402
-from tcot_hybrid.planners import Observation, PlannerContext, list_planners, make_planner  # noqa: E402
+from tcot_hybrid.planners import Observation, ObservationContext, list_planners, make_planner  # noqa: E402
 from tcot_hybrid.planners.direct import DirectPlanner, TcpKinematics  # noqa: E402
 from tcot_hybrid.planners.learned import (  # noqa: E402
     LearnedPlanner,
@@ -196,15 +196,15 @@ def test_instruction_policy(planner):
 def test_registry_and_checkpoint_selection(tmp_path, camera):
     assert {"learned", "direct"} <= set(list_planners())
     path = _save(tmp_path / "p.safetensors", camera)
-    ctx = PlannerContext(task=None, world=None, camera=camera, robot_name="panda", options={"checkpoint": str(path)})
+    ctx = ObservationContext(camera=camera, robot_name="panda", options={"checkpoint": str(path)})
     p = make_planner("learned", ctx)
     assert isinstance(p, LearnedPlanner) and p.needs_image
-    ctx_bad = PlannerContext(task=None, world=None, camera=camera, robot_name="ur5e", options={"checkpoint": str(path)})
+    ctx_bad = ObservationContext(camera=camera, robot_name="ur5e", options={"checkpoint": str(path)})
     with pytest.raises(CheckpointError, match="robot 'panda'"):
         make_planner("learned", ctx_bad)
     with pytest.raises(CheckpointError, match="'trajectory' planner checkpoint"):
         make_planner("direct", ctx)
-    ctx_none = PlannerContext(task=None, world=None, camera=camera, robot_name="ur5e", options={"checkpoint": None})
+    ctx_none = ObservationContext(camera=camera, robot_name="ur5e", options={"checkpoint": None})
     with pytest.raises(CheckpointError, match="no shipped trajectory planner checkpoint for robot 'ur5e'"):
         make_planner("learned", ctx_none)
 

@@ -30,11 +30,12 @@ def run_job(job: Job) -> dict:
     runner = None
     try:
         runner = EpisodeRunner(c)
-        probe = c.supervisor.mode.startswith("glsr")
+        # post-success probes of the detector (false alarms) only where the simulator ended the episode
+        probe = c.supervisor.mode.startswith("glsr") and c.stop_on == "simulator"
         rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
         rec.pop("config", None)
-        keep = ("supervisor", "detector", "perturbation", "sim_fault", "ik_not_converged", "plan_rejected",
-                "scene_reset", "tracking_reflex", "reference_brake", "safety")
+        keep = ("supervisor", "detector", "stop_check", "perturbation", "sim_fault", "ik_not_converged",
+                "plan_rejected", "scene_reset", "tracking_reflex", "reference_brake", "safety")
         rec["events"] = [e for e in rec["events"] if e["kind"] in keep or e["kind"].startswith("safety")]
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure
         rec = {"task": c.task, "planner": c.planner, "mode": c.supervisor.mode, "robot": c.robot,

@@ -1,4 +1,9 @@
-"""Planner registry: one place that knows how to build each planner by name."""
+"""Planner registry: one place that knows how to build each planner by name.
+
+The boundary between privileged and deployable planners is structural: a factory registered with
+``privileged=True`` (the scripted oracle) gets the task and the simulator world; every other factory gets an
+:class:`ObservationContext` (camera model, robot name, settings) and, per step, an :class:`Observation` (image,
+proprioception, instruction) — no reference to simulator state (``tests/test_planner_boundary.py``)."""
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -13,8 +18,26 @@ from tcot_hybrid.tasks import Task, World
 
 
 @dataclass(frozen=True, kw_only=True)
+class ObservationContext:
+    """What an observation-only planner's factory gets: how to read observations, nothing about the world.
+
+    camera:     the planner camera's model (intrinsics, pose, image size): the calibration a real robot has.
+    robot_name: the robot (checkpoint compatibility, its own kinematic model).
+    options:    planner settings (``RunConfig.oracle`` / ``learned``, the checkpoint path).
+    At every step the planner then gets an :class:`Observation` (image, proprioception, instruction).
+    """
+
+    camera: CameraModel
+    robot_name: str
+    options: dict[str, Any]
+
+
+@dataclass(frozen=True, kw_only=True)
 class PlannerContext:
-    """Everything a planner factory may use. Only the oracle may read ``world`` (privileged)."""
+    """The privileged context: the observation context's fields plus the task (its scripted skills) and the
+    live simulator ``world``. Only factories registered with ``privileged=True`` (the oracle) receive it;
+    :func:`make_planner` hands every other factory :meth:`observation_only`, so a learned planner cannot reach
+    simulator state by construction."""
 
     task: Task
     world: World
@@ -22,15 +45,30 @@ class PlannerContext:
     robot_name: str
     options: dict[str, Any]
 
+    def observation_only(self) -> ObservationContext:
+        return ObservationContext(camera=self.camera, robot_name=self.robot_name, options=dict(self.options))
 
-_FACTORIES: dict[str, Callable[[PlannerContext], Planner]] = {}
+
+_FACTORIES: dict[str, Callable[[Any], Planner]] = {}
+_PRIVILEGED: set[str] = set()
 
 
-def register_planner(name: str):
-    def deco(factory: Callable[[PlannerContext], Planner]):
+def register_planner(name: str, *, privileged: bool = False):
+    """Register a planner factory under ``name``. The factory gets an :class:`ObservationContext`; with
+    ``privileged=True`` a :class:`PlannerContext` (task and simulator world: scripted oracles only)."""
+    def deco(factory: Callable[[Any], Planner]):
         _FACTORIES[name] = factory
+        _PRIVILEGED.discard(name)
+        if privileged:
+            _PRIVILEGED.add(name)
         return factory
     return deco
+
+
+def is_privileged(name: str) -> bool:
+    """Whether planner ``name`` reads the simulator world (its figures are not those of a deployable planner)."""
+    check_planner_name(name)
+    return name in _PRIVILEGED
 
 
 def list_planners() -> list[str]:
@@ -57,12 +95,19 @@ def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None) -> 
     return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind)
 
 
-def make_planner(name: str, ctx: PlannerContext) -> Planner:
+def make_planner(name: str, ctx: PlannerContext | ObservationContext) -> Planner:
+    """Build planner ``name``: a privileged one from the full :class:`PlannerContext`, any other from the
+    observation-only view of ``ctx``."""
     check_planner_name(name)
-    return _FACTORIES[name](ctx)
+    if name in _PRIVILEGED:
+        if not isinstance(ctx, PlannerContext):
+            raise ConfigError(f"planner {name!r} reads the simulator world and needs a PlannerContext, "
+                              f"got {type(ctx).__name__}")
+        return _FACTORIES[name](ctx)
+    return _FACTORIES[name](ctx.observation_only() if isinstance(ctx, PlannerContext) else ctx)
 
 
-@register_planner("oracle")
+@register_planner("oracle", privileged=True)
 def _oracle(ctx: PlannerContext) -> Planner:
     from tcot_hybrid.planners.oracle import OracleConfig, OraclePlanner
 
@@ -70,18 +115,18 @@ def _oracle(ctx: PlannerContext) -> Planner:
 
 
 @register_planner("learned")
-def _learned(ctx: PlannerContext) -> Planner:
+def _learned(ctx: ObservationContext) -> Planner:
     from tcot_hybrid.planners.learned import LearnedPlanner  # lazy: torch loads only when needed
 
     return LearnedPlanner.from_context(ctx)
 
 
 @register_planner("direct")
-def _direct(ctx: PlannerContext) -> Planner:
+def _direct(ctx: ObservationContext) -> Planner:
     from tcot_hybrid.planners.direct import DirectPlanner
 
     return DirectPlanner.from_context(ctx)
 
 
-__all__ = ["MODES", "Observation", "Planner", "PlannerContext", "list_planners", "make_planner",
-           "register_planner", "check_planner_name"]
+__all__ = ["MODES", "Observation", "ObservationContext", "Planner", "PlannerContext", "check_planner_name",
+           "is_privileged", "list_planners", "make_planner", "register_planner"]

@@ -36,6 +36,7 @@ class Planner(ABC):
 
     name: ClassVar[str]
     needs_image: ClassVar[bool] = True
+    has_detector: ClassVar[bool] = False  # success_probability works (GLSR, --stop-on detector)
     replan_every_step: ClassVar[bool] = False  # direct-action policies act every step
 
     @abstractmethod

@@ -254,6 +254,7 @@ class LearnedPlanner(NetworkPlanner):
 
     name = "learned"
     needs_image = True
+    has_detector = True
     kind = "trajectory"
 
     def __init__(self, checkpoint, camera: CameraModel, *, config: LearnedPlannerConfig = LearnedPlannerConfig()):
