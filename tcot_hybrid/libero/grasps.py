@@ -158,11 +158,11 @@ def score_grasps(candidates, obstacles: Boxes, *, ground_z: float, kind: str, pr
     out = []
     for pos, rot in candidates:
         pts = [hand_points(pos, rot)]
-        for dz in (0.03, 0.06, APPROACH_DZ):
-            pts.append(hand_points(pos + np.array([0, 0, dz]), rot))
+        for dz in (0.03, 0.06, APPROACH_DZ):  # back out along the approach axis
+            pts.append(hand_points(pos - rot[:, 2] * dz, rot))
         pts = np.vstack(pts)
         hits = int(obstacles.contains(pts, margin=0.004).sum()) + int((pts[:, 2] < ground_z).sum())
-        yaw = abs(yaw_from_home(rot))
+        yaw = abs(yaw_from_home(rot)) if abs(rot[2, 2]) > 0.5 else 0.0
         extra = prefer(pos, rot) if prefer is not None else 0.0
         out.append(Grasp(pos=pos, rot=rot, kind=kind, score=hits * 1.0 + 0.3 * yaw + extra, collisions=hits))
     return sorted(out, key=lambda g: g.score)

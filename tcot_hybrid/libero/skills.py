@@ -74,6 +74,8 @@ class OracleContext:
         self._robot = set(robot)
         self.scene_bodies = np.array([b for b in range(1, m.nbody) if b not in self._robot], int)
         self.home_tcp = world.tcp_pos()
+        base = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "robot0_base")
+        self.base_pos = self.data.xpos[base].copy() if base >= 0 else self.home_tcp.copy()
         self.home_rot = world.tcp_rot()
         self.skills: list["LiberoSkill"] = []
         self.camera = getattr(task, "planner_camera", None) or "agentview"
@@ -265,10 +267,15 @@ class PickPlace(LiberoSkill):
             raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
                                 f"no rim and no top slab narrower than the open hand")
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
-        base = ctx.home_tcp
+        cands = cands + tilted(cands, ctx.base_pos)
 
-        def prefer(pos, rot):  # mild preference for grasps nearer the robot (reach, wrist)
-            return 0.5 * float(np.linalg.norm(pos[:2] - base[:2]))
+        def prefer(pos, rot):
+            # nearer the robot is easier; far and low grasps want the hand tilted away from the robot
+            # (a vertical hand 0.6 m out at table height stretched the wrist into the tracking reflex)
+            reach = float(np.linalg.norm(pos[:2] - ctx.base_pos[:2]))
+            ideal = np.clip((reach - 0.45) / 0.25, 0.0, 1.0) * TILT_MAX_RAD
+            tilt = float(np.arccos(np.clip(-rot[2, 2], -1.0, 1.0)))
+            return 0.5 * reach + 1.0 * abs(tilt - ideal)
 
         graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer)
         return graded[0]
@@ -330,7 +337,9 @@ class PickPlace(LiberoSkill):
             if z - 0.005 < z_min and z > z_min and not blocked(z_min):
                 z = z_min
             release_pt = np.array([tcp_xy[0], tcp_xy[1], z])
-            hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03])))
+            over = ctx.into_view([tcp_xy[0], tcp_xy[1], carry_z], max(top + 0.01 - lo[2], z + 0.03))
+            hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03]))
+                          and ctx.in_view(over))
             key = (hidden, round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
             if best is None or key < best[0]:
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
@@ -388,11 +397,14 @@ class PickPlace(LiberoSkill):
         centre, R, half = self._region(world, effects)
         return centre[:2] + R[:2, :2] @ self._slot_offset(half)
 
-    def _slot_offset(self, half) -> np.ndarray:
+    def _slot_offset(self, half, axis: int | None = None) -> np.ndarray:
+        """This object's slot when several go to one destination: spread along ``axis`` of the region
+        (default: its longer one)."""
         d = self.dest
         offset = np.zeros(2)
-        if d.slots > 1:  # spread several objects along the region's longer axis
-            axis = 0 if half[0] >= half[1] else 1
+        if d.slots > 1:
+            if axis is None:
+                axis = 0 if half[0] >= half[1] else 1
             span = half[axis] * 0.9
             offset[axis] = -span + 2 * span * (d.slot + 0.5) / d.slots
         return offset
@@ -412,13 +424,15 @@ class PickPlace(LiberoSkill):
             fit = min(slack, 0.01) - 0.002 * abs(yaw)
             if fit > best + 1e-9:
                 best, best_yaw = fit, yaw
-        base = self._slot_offset(half)
-        offsets = [base]
+        offsets = []
         f = 0.6 if self.dest.slots == 1 else 0.5 / self.dest.slots
-        for fx in (-f, 0.0, f):
-            for fy in (-f, 0.0, f):
-                if fx or fy:
-                    offsets.append(base + np.array([fx * half[0], fy * half[1]]))
+        for axis in ((None,) if self.dest.slots == 1 else (0, 1)):
+            base = self._slot_offset(half, axis)
+            offsets.append(base)
+            for fx in (-f, 0.0, f):
+                for fy in (-f, 0.0, f):
+                    if fx or fy:
+                        offsets.append(base + np.array([fx * half[0], fy * half[1]]))
         for off in offsets:
             yield centre[:2] + R[:2, :2] @ off, best_yaw
 
@@ -430,8 +444,9 @@ class PickPlace(LiberoSkill):
         g_pos, g_rot = p["grasp_pos"], p["grasp_rot"]
         release, R_place = p["release"], p["release_rot"]
         if not p["held"]:
-            pre = g_pos + np.array([0, 0, APPROACH_DZ])
-            kfs += [kf(pre, False, g_rot), kf(g_pos + np.array([0, 0, 0.02]), False, g_rot), kf(g_pos, False, g_rot),
+            back = -g_rot[:, 2]  # out along the approach axis (up for a top-down hand)
+            pre = g_pos + back * APPROACH_DZ
+            kfs += [kf(pre, False, g_rot), kf(g_pos + back * 0.02, False, g_rot), kf(g_pos, False, g_rot),
                     kf(g_pos, True, g_rot)]
         start = world.tcp_pos() if p["held"] else g_pos
         carry_z = p["carry_z"]
@@ -577,6 +592,26 @@ class MoveJoint(LiberoSkill):
         kfs.append(kf(kfs[-1].pos + np.array([0, 0, 0.08]), True, last.rot))
         del lo
         return kfs
+
+
+TILT_MAX_RAD = np.deg2rad(30.0)  # [rad] most a grasp's approach leans away from the robot
+
+
+def tilted(cands, base_pos) -> list:
+    """Tilted copies of top-down candidates: the approach axis leans away from the robot's base by 15 and 30
+    degrees about the closing axis (only where the closing axis runs across the lean, so the fingers still
+    close on the same two faces)."""
+    out = []
+    for p, R in cands:
+        r = np.asarray(p[:2], float) - base_pos[:2]
+        if np.linalg.norm(r) < 1e-6 or R[2, 2] > -0.99:
+            continue
+        r = np.append(r / np.linalg.norm(r), 0.0)
+        if abs(R[:, 1] @ r) > 0.5:
+            continue
+        for th in (0.5 * TILT_MAX_RAD, TILT_MAX_RAD):
+            out.append((p, frame(-E_Z * np.cos(th) + r * np.sin(th), R[:, 1])))
+    return out
 
 
 def _near(boxes: Boxes, lo, hi) -> Boxes:
