@@ -260,9 +260,11 @@ class PickPlace(LiberoSkill):
         ctx = self.ctx
         obj = ctx.object_boxes(self.obj, effects)
         kind = family(ctx.category.get(self.obj, self.obj))
-        cands = rim_candidates(obj) if kind == "rim" else top_candidates(obj)
-        if kind == "rim" and not cands:
-            kind, cands = "top", top_candidates(obj)
+        # rim-family objects (bowls, mugs, pots) get both kinds: a pot's "ring" may be its lid, and the
+        # fingers' clash with the object itself (below) sorts out which rim is a real, open rim
+        rims = rim_candidates(obj) if kind == "rim" else []
+        tops = top_candidates(obj)
+        cands = rims + tops
         if not cands:
             raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
                                 f"no rim and no top slab narrower than the open hand")
@@ -277,7 +279,20 @@ class PickPlace(LiberoSkill):
             tilt = float(np.arccos(np.clip(-rot[2, 2], -1.0, 1.0)))
             return 0.5 * reach + 1.0 * abs(tilt - ideal)
 
-        graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer)
+        n_rim = len(rims)
+        rim_ids = {id(c[1]) for c in rims}
+
+        def prefer_all(pos, rot):
+            cost = prefer(pos, rot)
+            # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
+            near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
+            own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
+            cost += float(own.sum())
+            if kind == "rim" and not rim_ids.__contains__(id(rot)) and n_rim:
+                cost += 0.5  # a top grasp on a rim-family object only when no rim pinch is clean
+            return cost
+
+        graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
         return graded[0]
 
     def _plan(self, world: World) -> dict:
@@ -552,13 +567,20 @@ class MoveJoint(LiberoSkill):
         reach = float(np.linalg.norm(u))
         u = u / reach
         tangent = np.sign(turn) * np.array([-u[1], u[0]])  # where the bar's end moves
-        bar_half = float(np.min(ext[bar][:, :2])) if bar.any() else 0.01
-        radius = max(0.6 * (reach + float(np.max(ext[bar][:, :2]))), 0.02)
+        t3 = np.append(tangent, 0.0)
+        frame_ut = np.column_stack([np.append(u, 0.0), t3, E_Z])
+        b_lo, b_hi = moving.select(bar).extents_in(frame_ut, anchor)
+        bar_half = float(max(-b_lo[1], b_hi[1]))  # the bar's half width across the push
+        radius = max(0.75 * reach, 0.02)
+        turn = turn + np.sign(turn) * KNOB_EXTRA_RAD  # the bar slides along the fingers as it turns
         z = float(tops.max()) - 0.018
-        start_xy = anchor[:2] + u * radius - tangent * (bar_half + 0.011 + 0.01)
+        start_xy = anchor[:2] + u * radius - tangent * (bar_half + 0.011 + 0.012)
         rot = top_down(u)  # closing axis radial: the closed fingers' flat side pushes along the tangent
         p0 = np.array([start_xy[0], start_xy[1], z])
-        kfs = [kf(p0 + np.array([0, 0, APPROACH_DZ]), True, rot), kf(p0, True, rot)]
+        # open above, close there: the planner resumes a plan from the point nearest the hand before its first
+        # gripper switch, and a plan that starts closed has its first switch far down the script
+        above = p0 + np.array([0, 0, APPROACH_DZ])
+        kfs = [kf(above, False, rot), kf(above, True, rot), kf(p0, True, rot)]
         n = max(3, int(np.ceil(abs(turn) / 0.15)))
         for k in range(1, n + 1):
             Rk = rot_z(turn * k / n)
@@ -580,7 +602,8 @@ class MoveJoint(LiberoSkill):
         thickness = 0.02
         p0 = np.array([*(anchor[:2] + u * 0.8 * length - normal * (thickness + 0.012)), hi[2] - 0.025])
         rot0 = top_down(u)
-        kfs = [kf(p0 + np.array([0, 0, APPROACH_DZ]), True, rot0), kf(p0, True, rot0)]
+        above = p0 + np.array([0, 0, APPROACH_DZ])
+        kfs = [kf(above, False, rot0), kf(above, True, rot0), kf(p0, True, rot0)]
         n = max(3, int(np.ceil(abs(turn) / 0.15)))
         for k in range(1, n + 1):
             Rk = rot_z(turn * k / n)
@@ -594,6 +617,7 @@ class MoveJoint(LiberoSkill):
         return kfs
 
 
+KNOB_EXTRA_RAD = 0.5  # [rad] a knob push goes this much past its goal (contact slips as the bar turns)
 TILT_MAX_RAD = np.deg2rad(30.0)  # [rad] most a grasp's approach leans away from the robot
 
 
