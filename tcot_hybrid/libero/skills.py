@@ -284,6 +284,8 @@ class PickPlace(LiberoSkill):
 
         def prefer_all(pos, rot):
             cost = prefer(pos, rot)
+            if not (ctx.in_view(pos) and ctx.in_view(pos - rot[:, 2] * 0.02)):
+                cost += 5.0  # plans live in the planner camera's pixels: a grasp it cannot see is refused
             # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
             near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
             own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
@@ -293,6 +295,7 @@ class PickPlace(LiberoSkill):
             return cost
 
         graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
+        self.last_grasps = graded  # for inspection
         return graded[0]
 
     def _plan(self, world: World) -> dict:
@@ -524,9 +527,14 @@ class MoveJoint(LiberoSkill):
         approach = -pull  # the hand approaches against the pull direction (into the cabinet)
         approach_h = approach - E_Z * (approach @ E_Z)
         approach_h /= np.linalg.norm(approach_h)
-        rot = frame(approach_h, E_Z)  # fingers close vertically on the horizontal bar
+        # fingers close vertically on the horizontal bar; of the two rolls (closing axis up or down) the one
+        # nearer the home hand pitched onto this approach (the other one ran joint 7 into its limit)
+        rot = min((frame(approach_h, E_Z), frame(approach_h, -E_Z)),
+                  key=lambda R: -np.trace(pitched_home(approach_h).T @ R))
         grip = handle_c.copy()
         dq = self.q_push - q_now  # along +axis per unit q
+        if (axis * dq) @ approach_h > 0:  # moving into the fixture: close it with a push
+            return self._push_in(moving, handle_c, approach_h, axis * dq)
         end = grip + axis * dq
         back = grip - approach_h * 0.10
         kfs = [kf(back + np.array([0, 0, 0.0]), False, rot), kf(grip - approach_h * 0.02, False, rot),
@@ -536,6 +544,39 @@ class MoveJoint(LiberoSkill):
             kfs.append(kf(grip + axis * dq * k / n, True, rot))
         kfs += [kf(end, False, rot), kf(end - approach_h * 0.10, False, rot)]
         del handle_front, lo, hi
+        return kfs
+
+    def _push_in(self, moving: Boxes, handle_c, into, travel) -> list[Keyframe]:
+        """Close a drawer: the closed fingertips, on a hand leaning 45 degrees back from the fixture (the palm
+        stays clear of the drawers above), push the drawer's front panel just below its handle along the
+        slide (on the handle bar itself the fingers rode up over it)."""
+        into = into / np.linalg.norm(into)
+        along = np.cross(E_Z, into)  # the handle bar's length direction (horizontal)
+        frame_d = np.column_stack([into, along, E_Z])
+        # the front panel: the outermost box (against ``into``) that spans most of the drawer's width
+        lo, hi = moving.extents_in(frame_d, handle_c)
+        width = hi[1] - lo[1]
+        face = None
+        for i in range(len(moving)):
+            b_lo, b_hi = moving.select(np.arange(len(moving)) == i).extents_in(frame_d, handle_c)
+            if b_hi[1] - b_lo[1] >= 0.6 * width and (face is None or b_lo[0] < face[0]):
+                face = (b_lo[0], b_lo[2], b_hi[2])
+        approach = into * np.sin(np.pi / 4) - E_Z * np.cos(np.pi / 4)
+        rot = min((frame(approach, along), frame(approach, -along)),
+                  key=lambda R: -np.trace(pitched_home(approach).T @ R))
+        if face is None:
+            contact = handle_c - into * 0.02
+        else:
+            z = max(face[1] + 0.012, -0.016)  # right under the handle bar (it keeps the fingers from riding up)
+            contact = handle_c + into * face[0] + E_Z * z
+        start = contact - into * 0.018  # fingertips just outside the face
+        end = start + travel + into * 0.01
+        above = start - approach * 0.08
+        kfs = [kf(above, False, rot), kf(above, True, rot), kf(start, True, rot)]
+        n = max(2, int(np.ceil(np.linalg.norm(end - start) / 0.03)))
+        for k in range(1, n + 1):
+            kfs.append(kf(start + (end - start) * k / n, True, rot))
+        kfs.append(kf(end - approach * 0.08, True, rot))
         return kfs
 
     # -- hinges: knobs (vertical axis, grasp the bar) and doors (push the leaf along its arc) ---------
@@ -636,6 +677,18 @@ def tilted(cands, base_pos) -> list:
         for th in (0.5 * TILT_MAX_RAD, TILT_MAX_RAD):
             out.append((p, frame(-E_Z * np.cos(th) + r * np.sin(th), R[:, 1])))
     return out
+
+
+def pitched_home(approach) -> np.ndarray:
+    """The home (top-down) hand turned by the smallest rotation that points its approach axis along
+    ``approach``: the reference for choosing among equivalent hands."""
+    a = np.asarray(approach, float) / np.linalg.norm(approach)
+    k = np.cross(-E_Z, a)
+    s = np.linalg.norm(k)
+    if s < 1e-9:
+        return R_DOWN.copy()
+    angle = np.arctan2(s, float(-E_Z @ a))
+    return axis_angle(k / s, angle) @ R_DOWN
 
 
 def _near(boxes: Boxes, lo, hi) -> Boxes:
