@@ -152,6 +152,39 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def side_candidates(obj: Boxes, base_pos) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Horizontal grasps of a tall object (bottles): the hand comes from the robot's side (straight and 30
+    degrees either way), fingers closing horizontally on a 2.4 cm slab at 35-65 % of its height that the
+    open hand spans. Carried this way the object hangs a few cm below the hand instead of its full height."""
+    lo, hi = obj.aabb()
+    height = hi[2] - lo[2]
+    if height < 0.10 or height < 1.5 * min(hi[0] - lo[0], hi[1] - lo[1]):
+        return []
+    c = (lo + hi) / 2
+    d0 = c[:2] - np.asarray(base_pos)[:2]
+    d0 = d0 / np.linalg.norm(d0)
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    out = []
+    for frac in (0.35, 0.5, 0.65):
+        z = max(lo[2] + frac * height, lo[2] + 0.04)  # the palm (3.2 cm either side) stays off the support
+        sel = (obj.centre[:, 2] - ext[:, 2] <= z + 0.012) & (obj.centre[:, 2] + ext[:, 2] >= z - 0.012)
+        if not sel.any():
+            continue
+        slab = obj.select(sel)
+        for turn in np.deg2rad([0.0, 30.0, -30.0]):
+            d = rot_z(turn)[:2, :2] @ d0
+            a = np.array([d[0], d[1], 0.0])
+            y = np.cross(E_Z, a)
+            R = np.column_stack([a, y, E_Z])
+            s_lo, s_hi = slab.extents_in(R, np.zeros(3))
+            if s_hi[1] - s_lo[1] > MAX_SPAN_M:
+                continue
+            mid = R @ ((s_lo + s_hi) / 2)
+            for yy in (y, -y):
+                out.append((np.array([mid[0], mid[1], z]), frame(a, yy)))
+    return out
+
+
 def score_grasps(candidates, obstacles: Boxes, *, ground_z: float, kind: str, prefer=None) -> list[Grasp]:
     """Score candidates: hand collisions at the grasp and on its vertical approach (margin 4 mm), points
     below the ground, wrist turn from the home yaw, and an optional extra cost ``prefer(pos, rot)``."""

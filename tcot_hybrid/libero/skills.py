@@ -28,6 +28,7 @@ from tcot_hybrid.libero.grasps import (
     rim_candidates,
     rot_z,
     score_grasps,
+    side_candidates,
     top_candidates,
     top_down,
 )
@@ -105,7 +106,7 @@ class OracleContext:
             return p
         for z in np.arange(p[2] - 0.01, z_floor - 1e-9, -0.01):
             q = np.array([p[0], p[1], z])
-            if self.in_view(q):
+            if self.in_view(q, margin_px=0.5):
                 return q
         return p
 
@@ -269,7 +270,8 @@ class PickPlace(LiberoSkill):
             raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
                                 f"no rim and no top slab narrower than the open hand")
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
-        cands = cands + tilted(cands, ctx.base_pos)
+        cands = cands + tilted(cands, ctx.base_pos) + side_candidates(obj, ctx.base_pos)
+        bottom = float(obj.aabb()[0][2])
 
         def prefer(pos, rot):
             # nearer the robot is easier; far and low grasps want the hand tilted away from the robot
@@ -277,6 +279,8 @@ class PickPlace(LiberoSkill):
             reach = float(np.linalg.norm(pos[:2] - ctx.base_pos[:2]))
             ideal = np.clip((reach - 0.45) / 0.25, 0.0, 1.0) * TILT_MAX_RAD
             tilt = float(np.arccos(np.clip(-rot[2, 2], -1.0, 1.0)))
+            if tilt > 1.0:  # a side grasp (horizontal hand): no lean to compare
+                return 0.5 * reach + 0.3
             return 0.5 * reach + 1.0 * abs(tilt - ideal)
 
         n_rim = len(rims)
@@ -290,6 +294,9 @@ class PickPlace(LiberoSkill):
             near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
             own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
             cost += float(own.sum())
+            # a tall object held near its top hangs its whole height below the hand: the carry then goes
+            # so high that the planner camera loses the hand (a wine bottle by the neck over the cabinet)
+            cost += 5.0 * max(0.0, float(pos[2] - bottom) - 0.08)
             if kind == "rim" and not rim_ids.__contains__(id(rot)) and n_rim:
                 cost += 0.5  # a top grasp on a rim-family object only when no rim pinch is clean
             return cost
@@ -469,7 +476,9 @@ class PickPlace(LiberoSkill):
         start = world.tcp_pos() if p["held"] else g_pos
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
-        lift = ctx.into_view([start[0], start[1], carry_z], max(floor, start[2] + 0.03))
+        # the lift only has to clear what is near the start (the carry then climbs towards the destination)
+        local = ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"]
+        lift = ctx.into_view([start[0], start[1], carry_z], max(local, start[2] + 0.03))
         over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
         kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
                 kf(over, True, R_place),
