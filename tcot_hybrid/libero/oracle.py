@@ -21,7 +21,7 @@ from tcot_hybrid.libero.skills import Destination, LiberoSkill, MoveJoint, Oracl
 SUPPORTED_PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 JOINT_PREDICATES = {"open": "is_open", "close": "is_close", "turnon": "turn_on", "turnoff": "turn_off"}
 SLIDE_DEPTH_M = 0.008  # [m] a slide goal this far inside the predicate's interval
-SLIDE_PUSH_M = 0.012  # [m] the hand moves this much further (the joint limit stops the part)
+SLIDE_PUSH_M = 0.03  # [m] the hand moves this much further (the joint limit stops the part; the pinch slips ~2 cm)
 HINGE_DEPTH_RAD = 0.35  # [rad] a hinge goal this far inside the predicate's interval
 HINGE_PUSH_RAD = 0.10  # [rad]
 TRAVEL_ABOVE_GROUND_M = 0.25  # [m] LiberoTask.travel_z above the lowest resting surface

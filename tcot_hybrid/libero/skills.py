@@ -540,7 +540,8 @@ class MoveJoint(LiberoSkill):
         # nearer the home hand pitched onto this approach (the other one ran joint 7 into its limit)
         rot = min((frame(approach_h, E_Z), frame(approach_h, -E_Z)),
                   key=lambda R: -np.trace(pitched_home(approach_h).T @ R))
-        grip = handle_c.copy()
+        # the pads' centre sits 4 mm behind the TCP (fingertip centre): put it on the bar's centre
+        grip = handle_c + approach_h * PAD_CENTRE_M
         dq = self.q_push - q_now  # along +axis per unit q
         if (axis * dq) @ approach_h > 0:  # moving into the fixture: close it with a push
             return self._push_in(moving, handle_c, approach_h, axis * dq)
@@ -667,6 +668,7 @@ class MoveJoint(LiberoSkill):
         return kfs
 
 
+PAD_CENTRE_M = 0.004  # [m] the finger pads' centre is this far behind the TCP along the approach axis
 KNOB_EXTRA_RAD = 0.5  # [rad] a knob push goes this much past its goal (contact slips as the bar turns)
 TILT_MAX_RAD = np.deg2rad(30.0)  # [rad] most a grasp's approach leans away from the robot
 
