@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+# The oracle planner slerps orientations with scipy; importing it costs ~0.4 s, which must not land inside the
+# first plan's latency budget (SupervisorConfig.max_plan_latency_s): LiberoTask.build_scene imports this module.
+import scipy.spatial.transform  # noqa: F401
 
 from tcot_hybrid.errors import PlanningError
 from tcot_hybrid.libero.skills import Destination, LiberoSkill, MoveJoint, OracleContext, PickPlace

@@ -140,6 +140,7 @@ class LiberoTask(Task):
         px = max(scene.planner_image_px, scene.video_width, scene.video_height)
         self.scene = LiberoScene.acquire(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
         check_camera(self.scene.model, scene.planner_camera)
+        import tcot_hybrid.libero.oracle  # noqa: F401  (its imports stay out of the first plan's time budget)
         # the oracle keeps every waypoint inside the planner camera's image (plans live in its pixels)
         self.planner_camera, self.planner_image_px = scene.planner_camera, scene.planner_image_px
         objects = libero_objects(self.scene)

@@ -19,6 +19,8 @@ FAMILIES = [
     ("in: top grasp, carton into the basket", "libero_object:pick_up_the_ketchup_and_place_it_in_the_basket", 3),
     ("open: drawer handle pinched and pulled", "libero_goal:open_the_middle_drawer_of_the_cabinet", 0),
     ("turnon: stove knob pushed along its arc", "libero_goal:turn_on_the_stove", 0),
+    ("in + close: bowl into an open drawer, drawer pushed shut",
+     "libero_10:KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it", 0),
 ]
 
 
