@@ -451,8 +451,11 @@ class PickPlace(LiberoSkill):
                 best, best_yaw = fit, yaw
         offsets = []
         f = 0.6 if self.dest.slots == 1 else 0.5 / self.dest.slots
-        for axis in ((None,) if self.dest.slots == 1 else (0, 1)):
-            base = self._slot_offset(half, axis)
+        bases = [self._slot_offset(half, axis) for axis in ((None,) if self.dest.slots == 1 else (0, 1))]
+        if self.dest.slots == 2:  # two objects: also the region's diagonals, where they sit furthest apart
+            sgn = -1.0 if self.dest.slot == 0 else 1.0
+            bases += [sgn * 0.6 * half, sgn * 0.6 * half * np.array([1.0, -1.0])]
+        for base in bases:
             offsets.append(base)
             for fx in (-f, 0.0, f):
                 for fy in (-f, 0.0, f):
