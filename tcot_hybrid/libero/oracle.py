@@ -87,6 +87,9 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
             dest_seen[target] = k + 1
             dest = Destination(relation=p, target=target, is_site=is_site, slot=k, slots=dest_count[target])
             places.append(PickPlace(ctx, obj, dest, g))
+            inside = _drawer_holding(ctx, obj)
+            if inside is not None and all(s.joint != inside.joint for s in opens_needed):
+                opens_needed.append(inside)
             if is_site and p == "in":
                 need = _open_for(ctx, target, g)
                 if need is not None and all(s.joint != need.joint for s in opens_needed):
@@ -174,6 +177,30 @@ def joint_skill(ctx: OracleContext, g: list[str]) -> MoveJoint:
     j = joints[0]
     goal, push = joint_goal(ctx, name, p, j)
     return MoveJoint(ctx, name, j, goal, push, g)
+
+
+def _drawer_holding(ctx: OracleContext, obj: str) -> MoveJoint | None:
+    """An Open step (carrying ``obj`` along) when ``obj`` lies inside a drawer that can open further: the hand
+    reaches a bowl in a half-open drawer only once the drawer is out (LIBERO's In test on the region)."""
+    env, m, d = ctx.env, ctx.model, ctx.data
+    p = ctx.world.pos(obj)
+    for name in env.object_sites_dict:
+        joints = _articulated_joints(ctx, name)
+        if not joints or int(m.jnt_type[joints[0]]) != int(mujoco.mjtJoint.mjJNT_SLIDE):
+            continue
+        sid = m.site(name).id
+        local = d.site_xmat[sid].reshape(3, 3).T @ (p - d.site_xpos[sid])
+        half = m.site_size[sid]
+        if np.all(np.abs(local[:2]) <= half[:2]) and -half[2] - 0.01 <= local[2] <= half[2]:
+            owner = _owner(ctx, name)
+            if not hasattr(owner, "is_open"):
+                return None
+            goal, push = joint_goal(ctx, name, "open", joints[0])
+            q = float(d.qpos[m.jnt_qposadr[joints[0]]])
+            if abs(goal - q) < 0.02:
+                return None
+            return MoveJoint(ctx, name, joints[0], goal, push, ["open", name], carried=(obj,))
+    return None
 
 
 def _open_for(ctx: OracleContext, region: str, g: list[str]) -> MoveJoint | None:

@@ -54,6 +54,7 @@ class Effect:
     q: float = 0.0
     obj: str | None = None
     pos: np.ndarray | None = None
+    carried: tuple[str, ...] = ()  # objects inside the moving part (a bowl in a drawer) move with it
 
 
 class OracleContext:
@@ -157,6 +158,8 @@ class OracleContext:
         if e.joint is not None:
             j = e.joint
             moved = subtree_bodies(m, int(m.jnt_bodyid[j]))
+            if e.carried:
+                moved = np.concatenate([moved] + [self.bodies[o] for o in e.carried])
             dq = e.q - float(d.qpos[m.jnt_qposadr[j]])
             axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
             if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE):
@@ -499,13 +502,14 @@ class MoveJoint(LiberoSkill):
     """Move an articulated joint (drawer slide, door hinge, knob) until a goal predicate holds: grasp the
     part's handle and carry it along the joint's path (slides: straight; hinges: an arc about the axis)."""
 
-    def __init__(self, ctx: OracleContext, name: str, joint: int, q_goal: float, q_push: float, predicate: list):
+    def __init__(self, ctx: OracleContext, name: str, joint: int, q_goal: float, q_push: float, predicate: list,
+                 carried: tuple[str, ...] = ()):
         self.ctx, self.obj, self.joint, self.predicate = ctx, name, joint, predicate
-        self.q_goal, self.q_push = q_goal, q_push
+        self.q_goal, self.q_push, self.carried = q_goal, q_push, tuple(carried)
         self.target = None
 
     def effect(self, world: World) -> Effect | None:
-        return Effect(joint=self.joint, q=self.q_goal)
+        return Effect(joint=self.joint, q=self.q_goal, carried=self.carried)
 
     def _keyframes(self, world: World) -> list[Keyframe]:
         ctx = self.ctx
