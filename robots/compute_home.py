@@ -19,6 +19,20 @@ import numpy as np
 R_DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 
 
+POS_TOL_M = 1e-3
+ROT_TOL_RAD = 1e-2
+
+
+def joint_bounds(m: mujoco.MjModel, jids: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """MJCF joint ranges [rad]; a continuous joint (``limited="false"``, or the range left at [0, 0]) is
+    unbounded (it used to be clamped to 0, pinning the joint)."""
+    lo = np.array([m.jnt_range[j, 0] for j in jids], dtype=float)
+    hi = np.array([m.jnt_range[j, 1] for j in jids], dtype=float)
+    free = np.array([not m.jnt_limited[j] or lo_ == hi_ == 0.0 for j, lo_, hi_ in zip(jids, lo, hi)])
+    lo[free], hi[free] = -np.inf, np.inf
+    return lo, hi
+
+
 def solve_home(mjcf: Path, arm_joints: list[str], ee_site: str, seed: np.ndarray,
                target_pos: np.ndarray, *, target_rot: np.ndarray = R_DOWN, iters: int = 2000,
                damping: float = 1e-3, posture_gain: float = 0.05) -> tuple[np.ndarray, float, float]:
@@ -30,7 +44,7 @@ def solve_home(mjcf: Path, arm_joints: list[str], ee_site: str, seed: np.ndarray
     jids = [m.joint(j).id for j in arm_joints]
     qadr = np.array([m.jnt_qposadr[j] for j in jids])
     dadr = np.array([m.jnt_dofadr[j] for j in jids])
-    lo, hi = m.jnt_range[jids, 0], m.jnt_range[jids, 1]
+    lo, hi = joint_bounds(m, jids)
     sid = m.site(ee_site).id
     q = np.array(seed, dtype=float)
     jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
@@ -53,6 +67,8 @@ def solve_home(mjcf: Path, arm_joints: list[str], ee_site: str, seed: np.ndarray
         N = np.eye(len(q)) - J.T @ np.linalg.solve(JJt, J)
         dq += N @ (w * (np.asarray(seed) - q))
         q = np.clip(q + dq, lo, hi)
+    cont = ~np.isfinite(hi)
+    q[cont] = (q[cont] + np.pi) % (2 * np.pi) - np.pi  # a continuous joint: the equivalent angle in [-pi, pi)
     d.qpos[qadr] = q
     mujoco.mj_forward(m, d)
     R = d.site_xmat[sid].reshape(3, 3)
@@ -76,6 +92,13 @@ def main() -> None:
                            np.array(args.seed), np.array(args.target))
     print("home_q = [" + ", ".join(f"{v:.6f}" for v in q) + "]")
     print(f"position error {pe * 1e3:.3f} mm, rotation error {re * 1e3:.3f} mrad")
+    if pe > POS_TOL_M or re > ROT_TOL_RAD:
+        import sys
+
+        print(f"warning: the pose is NOT met (tolerance {POS_TOL_M * 1e3:.0f} mm / {ROT_TOL_RAD * 1e3:.0f} mrad): the "
+              f"target may be out of reach or the joint ranges too tight; try another --seed or --target",
+              file=sys.stderr)
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":

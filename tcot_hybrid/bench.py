@@ -124,6 +124,46 @@ def ik_figures(robot_name: str, n: int, seed: int = 0) -> dict[str, dict]:
     return out
 
 
+def ik_plan_figures(robot_name: str, seeds: int) -> tuple[dict[str, dict], dict[str, float]]:
+    """Solve time per plan: the whole-plan casadi solve against mink's per-waypoint total (each waypoint seeded
+    from the last) on the same plans, the oracle's first global plan of every task for seeds 0..seeds-1. The
+    executor runs either when a plan is adopted, at planner rate; the control tick never waits on it.
+    casadi keeps one IPOPT solver per plan length: ``ik_plan_build_ms`` is the first plan of a length (NLP built),
+    ``ik_plan_ms/casadi`` every later one."""
+    from tcot_hybrid.ik import IKConfig, IKTarget, make_ik
+    from tcot_hybrid.ik.plan_study import workcell_plans
+    from tcot_hybrid.robot import load_robot_spec
+
+    spec = load_robot_spec(robot_name)
+    plans = workcell_plans(robot_name, range(seeds))
+    mink, cas = make_ik("mink", spec, IKConfig()), make_ik("casadi", spec, IKConfig())
+    t_mink, t_cas, t_build, conv = [], [], [], 0
+    for plan in plans:
+        P, R, q0 = plan["positions"], plan["rotations"], plan["q_start"]
+        t = time.perf_counter()
+        q = q0
+        for i in range(len(P)):
+            q = mink.solve(IKTarget(P[i], R[i]), q).q
+        t_mink.append((time.perf_counter() - t) * 1e3)
+        built = (len(P), "plan") in cas._solvers
+        t = time.perf_counter()
+        res = cas.solve_plan(P, R, q0)
+        (t_cas if built else t_build).append((time.perf_counter() - t) * 1e3)
+        if not built:  # solve again with the solver built, as every later plan of this length is
+            t = time.perf_counter()
+            res = cas.solve_plan(P, R, q0)
+            t_cas.append((time.perf_counter() - t) * 1e3)
+        conv += res.converged
+    figures = {"ik_plan_ms/casadi": _stat(t_cas, "ms"), "ik_plan_build_ms/casadi": _stat(t_build, "ms"),
+               "ik_plan_ms/mink_per_waypoint": _stat(t_mink, "ms"),
+               "ik_plan_converged/casadi": _stat([conv / len(plans)], "fraction")}
+    ratios = {"ik_plan_ms_p95/casadi": round(float(np.percentile(t_cas, 95)), 3),
+              "ik_plan_ms_p95/mink_per_waypoint": round(float(np.percentile(t_mink, 95)), 3),
+              "ik_plan_casadi_over_mink_median": round(statistics.median(t_cas) / statistics.median(t_mink), 3),
+              "ik_plan_waypoints_median": float(statistics.median(len(p["positions"]) for p in plans))}
+    return figures, ratios
+
+
 def ruckig_figures(robot_name: str, n: int, seed: int = 0) -> dict[str, dict]:
     from tcot_hybrid.robot import load_robot_spec
     from tcot_hybrid.smoothing import JointSmoother
@@ -273,7 +313,7 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
     ratios: dict[str, float] = {}
     result_notes: list[str] = []
     controllers = list_controllers()
-    steps = tqdm(total=repeats * (1 + len(controllers)) + 6, desc="bench", unit="job", disable=None)
+    steps = tqdm(total=repeats * (1 + len(controllers)) + 7, desc="bench", unit="job", disable=None)
     bare = []
     for _ in range(repeats):
         bare.append(bare_step_us(base, n_steps))
@@ -290,6 +330,10 @@ def run_bench(out_dir: str | Path, *, quick: bool, robot: str = "panda", command
         ratios[f"tick_over_mj_step/{ctrl}"] = round(statistics.median(ticks) / (substeps * statistics.median(bare)), 3)
         ratios[f"tick_over_ctrl_dt/{ctrl}"] = round(statistics.median(ticks) * 1e-6 / base.timing.ctrl_dt, 4)
     figures.update(ik_figures(robot, 30 if quick else 150)); steps.update(1)
+    plan_figures, plan_ratios = ik_plan_figures(robot, 1 if quick else 5)
+    figures.update(plan_figures)
+    ratios.update(plan_ratios)
+    steps.update(1)
     figures.update(ruckig_figures(robot, 50 if quick else 300)); steps.update(1)
     figures["render_planner_image_ms"] = _stat([render_ms(base, 20 if quick else 100) for _ in range(repeats)], "ms")
     steps.update(1)

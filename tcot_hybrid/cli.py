@@ -146,6 +146,13 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
                          "python": platform.python_version()}}
 
 
+def outcome(record: dict) -> str:
+    """SUCCESS, failure, or the fault that ended the episode (``FAULT sim_fault:mjWARN_BADQACC``)."""
+    if record.get("success"):
+        return "SUCCESS"
+    return f"FAULT {record['fault']}" if record.get("fault") else "failure"
+
+
 def cmd_run(argv: list[str]) -> int:
     from tqdm import tqdm
 
@@ -156,11 +163,23 @@ def cmd_run(argv: list[str]) -> int:
     if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
                         "use --video out.mp4 to record the episode instead")
+    from tcot_hybrid.jsonio import check_output_dir, check_output_file
+
+    check_output_dir(cmd.out)  # an unusable --out, --video or --timeline is found now, not after the episode
+    if (cmd.out / "episode.json").is_dir():
+        from tcot_hybrid.errors import OutputError
+
+        raise OutputError(f"--out {str(cmd.out)!r} holds a directory named episode.json; the record cannot go there")
+    for flag, path in (("--video", cmd.video), ("--timeline", cmd.timeline)):
+        if path is not None:
+            check_output_file(path, what=flag)
     try:
         runner = EpisodeRunner(cmd.cfg)
     except BaseException as exc:  # refused or crashed before anything moved: the record says so
         write_record(_unstarted_record(cmd.cfg, exc), cmd.out)
         raise
+    for line in runner.warning_lines():  # before the first step
+        print(f"warning: {line}", file=sys.stderr)
     video = EpisodeVideo(runner, cmd.video) if cmd.video else None
     timeline = Timeline() if cmd.timeline else None
     hooks = [h.capture for h in (video, timeline) if h is not None]
@@ -204,7 +223,7 @@ def cmd_run(argv: list[str]) -> int:
         if viewer:
             viewer.close()
     print(f"{record['task']} seed={record['seed']} robot={record['robot']} controller={record['controller']} "
-          f"ik={record['ik']} planner={record['planner']}: {'SUCCESS' if record['success'] else 'failure'} "
+          f"ik={record['ik']} planner={record['planner']}: {outcome(record)} "
           f"in {record['sim_time_s']:.1f}s sim / {record['wall_time_s']:.1f}s wall, "
           f"{len(record['events'])} events -> {path}" + (f", video {cmd.video}" if cmd.video else ""))
     for line in run_notes(record):
@@ -353,11 +372,77 @@ def cmd_bench(argv: list[str]) -> int:
     return 0
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_bench}
+# --- tcot robot check --------------------------------------------------------------------------------
+
+def cmd_robot(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="tcot robot", description="check a robot before using it (`tcot robot check "
+                                "NAME|PATH`): spec + MJCF, Pinocchio vs MuJoCo, gripper, and a reach map of the "
+                                "task workspace and of every task's grasp and release points")
+    sub = p.add_subparsers(dest="action", required=True)
+    c = sub.add_parser("check", help="validate a robot and map where it can grasp top-down")
+    c.add_argument("robot", help="a bundled robot name (`tcot list`) or the path of a robot.toml (or its folder)")
+    c.add_argument("--json", action="store_true", help="print the report as one JSON object on stdout")
+    c.add_argument("--png", type=Path, default=None,
+                   help="reach map PNG (default runs/robot_check/<robot>_reach.png; 'none' for no map)")
+    c.add_argument("--tasks", default=None, help="comma-separated tasks to check (default: all)")
+    c.add_argument("--seeds", type=int, default=10, help="seeded layouts per task (default 10)")
+    c.add_argument("--step", type=float, default=0.02, help="workspace grid step [m] (default 0.02)")
+    args = p.parse_args(argv)
+    from tcot_hybrid.errors import ConfigError
+    from tcot_hybrid.robot_check import check_robot
+    from tcot_hybrid.tasks import list_tasks
+
+    if args.seeds < 1 or not 0.005 <= args.step <= 0.2:
+        raise ConfigError(f"--seeds must be >= 1 and --step in [0.005, 0.2] m; got {args.seeds}, {args.step}")
+    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()] if args.tasks else None
+    known = [t.name for t in list_tasks()]
+    for t in tasks or []:
+        if t not in known:
+            from tcot_hybrid.errors import unknown_name
+
+            raise ConfigError(unknown_name("task", t, known))
+    png = None if args.png is not None and str(args.png).lower() == "none" else (
+        args.png or Path("runs/robot_check") / f"{Path(str(args.robot)).stem if '/' in str(args.robot) else args.robot}_reach.png")
+    if png is not None:
+        from tcot_hybrid.jsonio import check_output_file
+
+        check_output_file(png, what="--png")
+    report = check_robot(args.robot, tasks=tasks, seeds=args.seeds, step_m=args.step, png=png)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"robot {report['robot']}" + (f" ({report.get('mjcf')})" if report.get("mjcf") else ""))
+        for ch in report["checks"]:
+            mark = "ok  " if ch["ok"] else ("WARN" if ch["severity"] == "warning" else "FAIL")
+            print(f"  [{mark}] {ch['name']}: {ch['detail']}")
+        if "reachable_fraction" in report:
+            print(f"  reachable_fraction {report['reachable_fraction']:.3f} of the workspace "
+                  f"x {report['workspace']['x_m']} m, y {report['workspace']['y_m']} m at z {report['workspace']['z_m']} m")
+            for t in report["tasks"]:
+                def pct(v):
+                    return "-" if v is None else f"{v:.0%}"
+                print(f"    {t['task']:<34} grasps {pct(t['grasp_reachable_fraction']):>5} of {t['grasp_points']:<3} "
+                      f"releases {pct(t['release_reachable_fraction']):>5} of {t['release_points']}")
+        if report.get("png"):
+            print(f"  map -> {report['png']}")
+    return 0 if report["ok"] else 1
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "eval": cmd_eval, "bench": cmd_bench, "robot": cmd_robot}
 COMMANDS["collect"] = lambda argv: __import__("tcot_hybrid.data.collect", fromlist=["_"]).cmd_collect(argv)
 COMMANDS["labels"] = lambda argv: __import__("tcot_hybrid.data.vision_labels", fromlist=["_"]).cmd_labels(argv)
 COMMANDS["replay"] = lambda argv: __import__("tcot_hybrid.data.replay", fromlist=["_"]).cmd_replay(argv)
 COMMANDS["train"] = lambda argv: __import__("tcot_hybrid.learning.train_cli", fromlist=["_"]).cmd_train(argv)
+COMMANDS["ik-plans"] = lambda argv: __import__("tcot_hybrid.ik.plan_study", fromlist=["_"]).cmd_ik_plans(argv)
+
+
+MAX_ERROR_CHARS = 2000
+"""Longest error text printed (a message that somehow echoes a huge value is cut, never streamed out)."""
+
+
+def bounded_message(exc: BaseException) -> str:
+    msg = str(exc)
+    return msg if len(msg) <= MAX_ERROR_CHARS else msg[:MAX_ERROR_CHARS - 40] + f" ... [{len(msg)} chars, cut]"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -372,7 +457,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return COMMANDS[name](rest)
     except TcotError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {bounded_message(exc)}", file=sys.stderr)
         return 2
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.errors import ConfigError, short_repr
 
 
 def require_finite(field: str, value: Any) -> None:
@@ -22,41 +22,41 @@ def require_finite(field: str, value: Any) -> None:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:
-        raise ConfigError(f"{field} must be numeric, got {value!r}") from exc
+        raise ConfigError(f"{field} must be numeric, got {short_repr(value)}") from exc
     if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{field} must be finite, got {value!r}")
+        raise ConfigError(f"{field} must be finite, got {short_repr(value)}")
 
 
 def require_positive(field: str, value: Any) -> None:
     """Raise ConfigError unless ``value`` is a finite number (or array) strictly greater than zero."""
     if isinstance(value, bool):
-        raise ConfigError(f"{field} must be a positive number, got bool {value!r}")
+        raise ConfigError(f"{field} must be a positive number, got bool {short_repr(value)}")
     require_finite(field, value)
     if not np.all(np.asarray(value, dtype=float) > 0):
-        raise ConfigError(f"{field} must be > 0, got {value!r}")
+        raise ConfigError(f"{field} must be > 0, got {short_repr(value)}")
 
 
 def require_nonnegative(field: str, value: Any) -> None:
     """Raise ConfigError unless ``value`` is finite and >= 0."""
     if isinstance(value, bool):
-        raise ConfigError(f"{field} must be a number, got bool {value!r}")
+        raise ConfigError(f"{field} must be a number, got bool {short_repr(value)}")
     require_finite(field, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
-        raise ConfigError(f"{field} must be >= 0, got {value!r}")
+        raise ConfigError(f"{field} must be >= 0, got {short_repr(value)}")
 
 
 def require_int(field: str, value: Any, *, minimum: int | None = None) -> None:
     """Raise ConfigError unless ``value`` is an int (not bool) and >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ConfigError(f"{field} must be an integer, got {value!r} ({type(value).__name__})")
+        raise ConfigError(f"{field} must be an integer, got {short_repr(value)} ({type(value).__name__})")
     if minimum is not None and value < minimum:
-        raise ConfigError(f"{field} must be >= {minimum}, got {value!r}")
+        raise ConfigError(f"{field} must be >= {minimum}, got {short_repr(value)}")
 
 
 def require_choice(field: str, value: Any, choices: tuple[str, ...] | list[str]) -> None:
     """Raise ConfigError unless ``value`` is one of ``choices``."""
     if value not in choices:
-        raise ConfigError(f"{field} = {value!r} is not valid; choose one of {', '.join(map(str, choices))}")
+        raise ConfigError(f"{field} = {short_repr(value)} is not valid; choose one of {', '.join(map(str, choices))}")
 
 
 def whole_multiple(field: str, value: float, base_field: str, base: float) -> int:
@@ -71,6 +71,13 @@ def whole_multiple(field: str, value: float, base_field: str, base: float) -> in
             f"got ratio {ratio:.6g}"
         )
     return n
+
+
+TIMING_BOUNDS_S = {"sim_dt": (1e-5, 0.01), "ctrl_dt": (1e-4, 0.05), "plan_dt": (1e-3, 1.0)}
+"""Allowed range of each loop period [s]. Below: MuJoCo needs ~1e5 steps per simulated second and the
+settle loop alone runs for hours (1e-300 would need ~1e299 ticks); above: the physics of a stiff arm
+diverges (sim_dt), a sampled controller with the default gains goes unstable (ctrl_dt: sqrt(kp)
+ctrl_dt must stay well below 1), and the planner reacts slower than a second (plan_dt)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,7 +97,14 @@ class TimingConfig:
 
     def __post_init__(self) -> None:
         for name in ("sim_dt", "ctrl_dt", "plan_dt"):
-            require_positive(name, getattr(self, name))
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise ConfigError(f"{name} must be a number of seconds, got {short_repr(value)}")
+            require_positive(name, value)
+            lo, hi = TIMING_BOUNDS_S[name]
+            if not lo <= getattr(self, name) <= hi:
+                raise ConfigError(f"{name} = {getattr(self, name)!r} s is outside [{lo:g}, {hi:g}] s, the range "
+                                  f"MuJoCo and the controllers can use")
         whole_multiple("ctrl_dt", self.ctrl_dt, "sim_dt", self.sim_dt)
         whole_multiple("plan_dt", self.plan_dt, "ctrl_dt", self.ctrl_dt)
 
@@ -121,27 +135,27 @@ def coerce_field(path: str, tp: Any, value: Any) -> Any:
         return coerce_field(path, inner[0], value)
     if origin is dict:
         if not isinstance(value, dict):
-            raise ConfigError(f"{path} must be a mapping, got {value!r}")
+            raise ConfigError(f"{path} must be a mapping, got {short_repr(value)}")
         _, vt = typing.get_args(tp)
         return {str(k): coerce_field(f"{path}.{k}", vt, v) for k, v in value.items()}
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{path} must be a number, got {value!r} ({type(value).__name__})")
+            raise ConfigError(f"{path} must be a number, got {short_repr(value)} ({type(value).__name__})")
         try:
             return float(value)
         except OverflowError as exc:  # an integer beyond float range, e.g. 10**400 in YAML
             raise ConfigError(f"{path} must be a finite number, got a {value.bit_length()}-bit integer") from exc
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{path} must be an integer, got {value!r} ({type(value).__name__})")
+            raise ConfigError(f"{path} must be an integer, got {short_repr(value)} ({type(value).__name__})")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{path} must be true or false, got {value!r}")
+            raise ConfigError(f"{path} must be true or false, got {short_repr(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{path} must be a string, got {value!r} ({type(value).__name__})")
+            raise ConfigError(f"{path} must be a string, got {short_repr(value)} ({type(value).__name__})")
         return value
     return value
 
@@ -149,13 +163,13 @@ def coerce_field(path: str, tp: Any, value: Any) -> Any:
 def from_mapping(cls, data: Any, *, prefix: str = ""):
     """Build dataclass ``cls`` from a plain mapping, naming any unknown key or wrongly typed value."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{prefix or cls.__name__} must be a mapping, got {data!r}")
+        raise ConfigError(f"{prefix or cls.__name__} must be a mapping, got {short_repr(data)}")
     hints = typing.get_type_hints(cls)
     fields = {f.name for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(data) - fields)
     if unknown:
         where = prefix or "config"
-        raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {', '.join(sorted(fields))}")
+        raise ConfigError(f"unknown key(s) {short_repr(unknown)} in {where}; valid keys: {', '.join(sorted(fields))}")
     kwargs = {k: coerce_field(f"{prefix}.{k}" if prefix else k, hints[k], v) for k, v in data.items()}
     try:
         return cls(**kwargs)

@@ -100,11 +100,22 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     ik = make_ik(cfg.ik, robot, cfg.ik_params)
     executor = MotionExecutor(sim, ik=ik, smoother=smoother, controller=controller, safety=safety,
                               dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
-    ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name,
+    ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name, robot=robot,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint})
     # planner_factory (e.g. label replay) is not privileged: it sees what a learned planner sees
     planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx.observation_only())
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)
+
+
+def reach_warnings(stack: Stack) -> list[dict]:
+    """Grasp/release points of the episode's layout its robot cannot reach (``robot_check``); a check that
+    cannot run (a task without a script) warns about nothing rather than stopping the run."""
+    from tcot_hybrid.robot_check import unreachable_targets
+
+    try:
+        return unreachable_targets(stack.robot, stack.task, stack.sim.world, stack.sim.T_base_world)
+    except Exception:  # noqa: BLE001 - advisory only
+        return []
 
 
 class EpisodeRunner:
@@ -135,6 +146,17 @@ class EpisodeRunner:
         self.plans: list = []
         self._obs: tuple[int, Observation] | None = None
         self.success_time_s: float | None = None
+        self.reach_warnings = reach_warnings(self.stack)  # before any step: printed by `tcot run`, recorded
+
+    def warning_lines(self) -> list[str]:
+        """One line per grasp/release point of this layout the robot cannot reach top-down."""
+        from tcot_hybrid.robot import robot_ref
+
+        r = self.stack.robot
+        where = robot_ref(r)
+        return [f"robot {r.name!r} cannot reach the {w['target']} point {w['pos']} m of {self.cfg.task!r} top-down "
+                f"(IK misses it by {w['pos_err_m'] * 100:.1f} cm): the episode will likely fail; `tcot robot check "
+                f"{where}` maps its reach" for w in self.reach_warnings]
 
     def observe(self, step: int) -> Observation:
         """The planner's observation at this step (rendered at most once per step)."""
@@ -248,6 +270,8 @@ class EpisodeRunner:
         max_steps = self.max_steps
         self.perturbation_note = self._perturbation_note()  # the time limit may have been changed since __init__
         by_detector = cfg.stop_on == "detector"
+        for w in self.reach_warnings:
+            s.executor.event("unreachable_target", **w)
         self.settle()
         step = 0
         try:
@@ -275,7 +299,7 @@ class EpisodeRunner:
                 self.stopped_by = "time_limit"
             if by_detector and self.fault is None:
                 self.success = bool(s.task.success(s.sim.world))  # judged afterwards, on the state it stopped in
-            self.success_time_s = float(s.sim.data.time) if self.success else None
+            self.success_time_s = s.sim.time_s if self.success else None
             for _ in range(steps_after_success if self.success and not by_detector else 0):
                 if probe_detector:
                     p = s.planner.success_probability(self.observe(step))
@@ -315,7 +339,7 @@ class EpisodeRunner:
             "mode": cfg.supervisor.mode, "seed": cfg.seed,
             "success": success, "fault": self.fault,
             "success_time_s": self.success_time_s if success else None,
-            "sim_time_s": round(float(s.sim.data.time), 4), "wall_time_s": round(wall_time_s, 4),
+            "sim_time_s": round(s.sim.time_s, 4), "wall_time_s": round(wall_time_s, 4),
             "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
             **self.perturbation_summary(),
             "stop_on": cfg.stop_on, "stopped_by": self.stopped_by,
@@ -325,6 +349,7 @@ class EpisodeRunner:
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),
             "ik_failures": ex.ik_failures,
+            "plans_infeasible": ex.plans_infeasible,
             "tracking_reflexes": ex.tracking_reflexes,
             "safety": ex.safety.summary(),
             "events": ex.events + ex.safety.event_dicts(),
@@ -338,9 +363,9 @@ class EpisodeRunner:
 
 
 def write_record(record: dict, out_dir: str | Path) -> Path:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "episode.json"
-    path.write_text(json.dumps(record, indent=2, default=_json_default))
-    return path
+    """Write ``out_dir/episode.json`` atomically (never cut off, never through a symlink)."""
+    from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
+
+    out = check_output_dir(out_dir) if not Path(out_dir).is_dir() else Path(out_dir)
+    return atomic_write_text(out / "episode.json", json.dumps(record, indent=2, default=_json_default))
 

@@ -49,8 +49,58 @@ class SimulationError(TcotError):
     """The simulator diverged or warned (MuJoCo auto-reset, bad accelerations)."""
 
 
+class OutputError(TcotError):
+    """An output location cannot take a record (read-only, an existing file where a folder belongs, a
+    directory where a file belongs, disk full). Checked before an episode; records are written atomically."""
+
+
 class DatasetError(TcotError):
     """A demonstration file is missing, truncated, corrupt or not in the expected layout."""
+
+
+MAX_ECHO_CHARS = 200
+"""Longest rendering of a bad value that an error message echoes (a huge value is cut, its size said)."""
+
+
+def short_repr(value: object, limit: int = MAX_ECHO_CHARS) -> str:
+    """``repr(value)`` cut to about ``limit`` characters. Containers are rendered item by item and the
+    rendering stops once the budget is spent, so a value built by YAML aliases (millions of shared
+    items) or nested thousands deep is never expanded into a string."""
+    out: list[str] = []
+    budget = [limit]
+
+    def emit(text: str) -> bool:
+        out.append(text[:max(budget[0], 0)])
+        budget[0] -= len(text)
+        return budget[0] > 0
+
+    def walk(v: object, depth: int) -> bool:
+        if depth > 50:
+            return emit("...")
+        if isinstance(v, (list, tuple, set, frozenset, dict)):
+            open_, close = ("{", "}") if isinstance(v, (dict, set, frozenset)) else \
+                ("(", ")") if isinstance(v, tuple) else ("[", "]")
+            if not emit(open_):
+                return False
+            items = v.items() if isinstance(v, dict) else v
+            for i, item in enumerate(items):
+                if i and not emit(", "):
+                    return False
+                if isinstance(v, dict):
+                    if not (walk(item[0], depth + 1) and emit(": ") and walk(item[1], depth + 1)):
+                        return False
+                elif not walk(item, depth + 1):
+                    return False
+            return emit(close)
+        text = repr(v)
+        return emit(text if len(text) <= limit else text[:limit])
+
+    complete = walk(value, 0)
+    text = "".join(out)
+    if complete:
+        return text
+    size = f" ({len(value)} items)" if isinstance(value, (list, tuple, set, frozenset, dict)) else ""
+    return text + f"...{size}"
 
 
 def unknown_name(kind: str, name: object, valid: Iterable[str]) -> str:

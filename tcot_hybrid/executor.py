@@ -6,6 +6,8 @@ Data flows one way. The executor owns the current plan and the waypoint it is he
 - a waypoint whose gripper bit differs from the current gripper command (and the last waypoint) is a
   stop: the arm arrives, the gripper switches, and the arm holds still for ``gripper_settle_s``.
 Every anomaly (rejected plan, IK not converged, slow arrival, safety fault) becomes an event.
+With a whole-plan IK backend (casadi) every waypoint's joint target is solved when the plan is adopted, at
+planner rate and before any motion (never inside ``control_tick``); an infeasible plan is refused then.
 """
 from __future__ import annotations
 
@@ -156,6 +158,8 @@ class MotionExecutor:
         self._last_tau = np.zeros(sim.robot.dof)
         self._faulted = False
         self.ik_failures = 0
+        self.plans_infeasible = 0  # plans refused by a whole-plan IK solve (event ik_plan_infeasible)
+        self._plan_q: np.ndarray | None = None  # joint targets of the current plan from a whole-plan solve
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
         self.max_joint_limit_violation = 0.0
@@ -164,7 +168,7 @@ class MotionExecutor:
 
     # --- events -----------------------------------------------------------------------------------
     def event(self, kind: str, **info) -> None:
-        self.events.append({"t": round(float(self.sim.data.time), 4), "kind": kind, **info})
+        self.events.append({"t": round(self.sim.time_s, 4), "kind": kind, **info})
 
     # --- plans ------------------------------------------------------------------------------------
     def set_plan(self, plan: WaypointPlan) -> bool:
@@ -183,11 +187,18 @@ class MotionExecutor:
                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
                 switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
             rots = rots[source]
-        self.plan, self.points, self.grip, self.rots = plan, points, grip, np.asarray(rots)
-        self.latest_points[plan.kind] = (points, self.grip)
+        rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q
-        if np.max(np.abs(ref_q - q)) > self.config.resync_tol_rad:
+        resync = np.max(np.abs(ref_q - q)) > self.config.resync_tol_rad
+        plan_q = None
+        if getattr(self.ik, "solves_plans", False):  # every waypoint solved (or the plan refused) before motion
+            plan_q = self._solve_plan(points, rots, q if resync else self._ik_seed, plan)
+            if plan_q is None:
+                return False
+        self.plan, self.points, self.grip, self.rots, self._plan_q = plan, points, grip, rots, plan_q
+        self.latest_points[plan.kind] = (points, self.grip)
+        if resync:
             self.event("reference_resynced", max_dev_rad=float(np.max(np.abs(ref_q - q))))
             try:
                 self.smoother.reset(q, self.sim.qd)
@@ -200,6 +211,31 @@ class MotionExecutor:
         self._activate(0)
         return True
 
+    def _solve_plan(self, points: np.ndarray, rots: np.ndarray, q_start: np.ndarray,
+                    plan: WaypointPlan) -> np.ndarray | None:
+        """Joint targets of every waypoint from one whole-plan solve (IK backends with ``solve_plan``), or None:
+        an infeasible plan is refused before any motion with an ``ik_plan_infeasible`` event naming the waypoint
+        farthest from its target and how far off the closest reachable pose stays; the old plan is kept and
+        ``plans_infeasible`` tells the supervisor (GLSR replans on it). ``points``/``rots`` are in the world frame;
+        the solve is in the robot's base frame, with the world's support surface as the height reference."""
+        T = self.sim.T_base_world
+        R_bw, p_bw = T[:3, :3], T[:3, 3]
+        support_z = float(R_bw[2] @ np.array([0.0, 0.0, self.sim.support_z]) + p_bw[2])  # base upright: a plane z
+        try:
+            res = self.ik.solve_plan(points @ R_bw.T + p_bw, R_bw @ rots, q_start, support_z=support_z)
+        except TcotError as exc:  # unusable input (e.g. a point out of range): refused like an unliftable plan
+            self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
+            return None
+        if res.converged:
+            return res.q
+        self.plans_infeasible += 1
+        w = res.worst if res.worst is not None else int(np.argmax(res.pos_err))
+        self.event("ik_plan_infeasible", plan_kind=plan.kind, step=plan.step, waypoint=w, waypoints=len(points),
+                   status=res.status, solver_status=res.solver_status, offending=list(res.offending[:10]),
+                   pos_err_m=round(float(res.pos_err[w]), 5), rot_err_rad=round(float(res.rot_err[w]), 5),
+                   target=[round(float(v), 4) for v in points[w]])
+        return None
+
     def _is_stop(self, i: int) -> bool:
         return i == len(self.points) - 1 or bool(self.grip[i]) != self.sim.gripper_closed_cmd()
 
@@ -211,6 +247,10 @@ class MotionExecutor:
         self.index, self.phase = i, "move"
         if not keep:
             self._arrived_at = self._waiting_at = None
+        if self._plan_q is not None:  # solved with the whole plan when it was adopted
+            self._ik_seed = self._plan_q[i]
+            self._set_target(self._plan_q[i], i)
+            return
         # Plans live in the world frame; IK solves in the robot's own base frame (identity in the workcell).
         T = self.sim.T_base_world
         target = IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=T[:3, :3] @ self.rots[i])
@@ -225,8 +265,11 @@ class MotionExecutor:
             self.event("ik_not_converged", waypoint=i, status=res.status, pos_err_m=round(res.pos_err, 5),
                        rot_err_rad=round(res.rot_err, 5))
         self._ik_seed = res.q
+        self._set_target(res.q, i)
+
+    def _set_target(self, q: np.ndarray, i: int) -> None:
         try:
-            self.smoother.set_target(res.q)
+            self.smoother.set_target(q)
         except TrajectoryError as exc:  # e.g. retargeted while moving fast toward a joint limit
             self.event("reference_brake", waypoint=i, reason=str(exc))
             self.smoother.brake()  # stop inside the limits; the waypoint logic moves on from rest
@@ -252,6 +295,9 @@ class MotionExecutor:
             return
         if err > self.config.reach_tol_m:
             self.event("slow_arrival", waypoint=i, tcp_err_m=round(err, 4))
+            if bool(self.grip[i]) and not self.sim.gripper_closed_cmd():  # closing where the TCP never got
+                self.event("unreachable_grasp", waypoint=i, tcp_err_m=round(err, 4),
+                           target=[round(float(v), 4) for v in self.points[i]])
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
@@ -268,7 +314,7 @@ class MotionExecutor:
 
     def reset_after_scene_reset(self) -> None:
         """The simulator was reset (arm at home): drop the plan and restart the reference there."""
-        self.plan, self.points, self.grip = None, np.zeros((0, 3)), np.zeros(0, bool)
+        self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
         self.rots = np.zeros((0, 3, 3))
         self.index, self.phase = -1, "idle"
         self.smoother.reset(self.sim.q)

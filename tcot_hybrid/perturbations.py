@@ -106,6 +106,8 @@ def _first_open_skill(runner):
 def _relocate(runner, name: str, distance: float, rng) -> dict | None:
     """Move a free object ``distance`` [m] in a random direction to a free spot in the workspace."""
     world = runner.stack.sim.world
+    if name not in world.objects:  # e.g. a LIBERO fixture or region (a cabinet, a plate's site): not movable
+        return None
     info = world.objects[name]
     if info.kind == "drawer":  # the cabinet is fixed to the table: shift it sideways instead
         cab = world.model.body(f"{name}_cabinet").id
@@ -118,14 +120,18 @@ def _relocate(runner, name: str, distance: float, rng) -> dict | None:
     others = [(world.pos(n)[:2], FREE_RADIUS.get(o.kind, 0.04)) for n, o in world.objects.items()
               if n != name and o.kind in FREE_RADIUS]
     r = FREE_RADIUS.get(info.kind, 0.04)
-    x0, x1, y0, y1 = WORKSPACE if old[0] <= WORKSPACE[1] else FAR_ZONE
+    zone = runner.stack.task.relocation_zone(world, name)
+    if zone is None:
+        return None
+    x0, x1, y0, y1 = zone
     for _ in range(200):
         a = rng.uniform(0, 2 * np.pi)
         p = old[:2] + distance * np.array([np.cos(a), np.sin(a)])
         if not (x0 <= p[0] <= x1 and y0 <= p[1] <= y1):
             continue
         if all(np.linalg.norm(p - q) >= r + rq + 0.01 for q, rq in others):
-            world.set_pose(name, (p[0], p[1], info.rest_z + 0.001), float(rng.uniform(-0.3, 0.3)) * (
+            rest_z = info.rest_z if runner.stack.task.world_kind == "workcell" else old[2]  # LIBERO: same support
+            world.set_pose(name, (p[0], p[1], rest_z + 0.001), float(rng.uniform(-0.3, 0.3)) * (
                 info.kind in ("cube", "cylinder")))
             return {"object": name, "moved_m": np.round(np.append(p - old[:2], 0.0), 4).tolist()}
     return None

@@ -106,12 +106,27 @@ class RobotSpec:
 
     def __post_init__(self) -> None:
         _validate_fields(self)
+        check_physical_bounds(self)
         _validate_against_mjcf(self, _compile(self.name, self.mjcf_path))
 
     @property
     def dof(self) -> int:
         """Number of arm joints."""
         return len(self.arm_joints)
+
+
+SPEC_BOUNDS: dict[str, tuple[float, float, str]] = {
+    "q_min": (-4 * math.pi, 4 * math.pi, "rad"),
+    "q_max": (-4 * math.pi, 4 * math.pi, "rad"),
+    "v_max": (0.01, 10.0, "rad/s"),
+    "a_max": (0.1, 1000.0, "rad/s^2"),
+    "j_max": (1.0, 1e5, "rad/s^3"),
+    "tau_max": (0.1, 2000.0, "N m"),
+    "kp": (1e-3, 1e5, "1/s^2"),
+    "kd": (1e-3, 1e3, "1/s"),
+}
+"""Per-joint ranges a spec value must lie in (docs/robot_spec.md, "Sanity bounds"). No real arm is
+outside them; a value beyond (v_max 1e12, tau_max 1e9) would silently switch a safety check off."""
 
 
 def _err(robot: str, fld: str, msg: str) -> RobotModelError:
@@ -202,6 +217,18 @@ def _validate_fields(spec: RobotSpec) -> None:
         i = int(bad[0])
         raise _err(r, "home_q", f"joint {spec.arm_joints[i]!r} home {float(spec.home_q[i])} rad is outside "
                                 f"[q_min, q_max] = [{float(spec.q_min[i])}, {float(spec.q_max[i])}]")
+
+
+def check_physical_bounds(spec: RobotSpec) -> None:
+    """Refuse limits and gains outside SPEC_BOUNDS (values no real arm has), naming joint, value, bound."""
+    for fld, (lo, hi, unit) in SPEC_BOUNDS.items():
+        arr = getattr(spec, fld)
+        bad = np.flatnonzero((arr < lo) | (arr > hi))
+        if bad.size:
+            i = int(bad[0])
+            raise _err(spec.name, fld, f"joint {spec.arm_joints[i]!r} has {float(arr[i]):g} {unit}, outside the "
+                                       f"sanity range [{lo:g}, {hi:g}] {unit} (no real arm has it; "
+                                       f"docs/robot_spec.md, 'Sanity bounds')")
 
 
 def _compile(robot: str, path: Path) -> mujoco.MjModel:
@@ -540,3 +567,34 @@ def _check_against_mujoco(robot: PinocchioRobot, m: mujoco.MjModel, idx: RobotIn
             if M_err > tol:
                 raise _err(spec.name, "mjcf", f"Pinocchio and MuJoCo mass matrices differ by {M_err:.3g}; "
                                               "give every body an explicit <inertial>")
+
+
+# --- identity and sanity checks (bring-your-own arm) ---------------------------------------------------
+
+def robot_ref(spec: RobotSpec) -> str:
+    """How to name this robot on the command line: its name if bundled, else the folder of its robot.toml
+    (a name would not find it)."""
+    folder = spec.mjcf_path.parent
+    bundled = folder.parent.resolve() == _robots_dir().resolve() and folder.name == spec.name
+    return spec.name if bundled else str(folder)
+
+
+def robot_model_digest(spec: RobotSpec) -> str:
+    """Hash of what a planner checkpoint depends on: the compiled robot model's kinematics and dynamics
+    (bodies, joints, sites, actuators; floats rounded to 1e-9) and the spec's arm joints and TCP site.
+    Checkpoints are matched to a robot by this hash, never by name: a different arm renamed ``panda``
+    has another digest; reformatting the MJCF or moving its folder keeps it."""
+    import hashlib
+
+    m = _compile(spec.name, spec.mjcf_path)
+    h = hashlib.sha256()
+    h.update(repr((spec.arm_joints, spec.ee_site, spec.gripper_joints)).encode())
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i) or "" for i in range(m.njnt)]
+    h.update(repr(names).encode())
+    for arr in (m.body_parentid, m.body_pos, m.body_quat, m.body_ipos, m.body_iquat, m.body_mass, m.body_inertia,
+                m.jnt_type, m.jnt_bodyid, m.jnt_axis, m.jnt_pos, m.jnt_range, m.dof_armature, m.dof_damping,
+                m.site_bodyid, m.site_pos, m.site_quat, m.actuator_trnid, m.actuator_gear, m.actuator_ctrlrange):
+        a = np.asarray(arr)
+        h.update(str(a.shape).encode())
+        h.update((np.round(a.astype(float), 9) + 0.0).tobytes() if a.dtype.kind == "f" else a.astype(np.int64).tobytes())
+    return h.hexdigest()[:16]

@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 
 from tcot_hybrid.config import TimingConfig, from_mapping, require_choice, require_int
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.errors import ConfigError, short_repr
 from tcot_hybrid.executor import ExecutorConfig
 from tcot_hybrid.ik import IKConfig
 from tcot_hybrid.lift import LiftConfig
@@ -55,8 +55,12 @@ class RunConfig:
     """
 
     task: str = "goal_cube_on_plate"
+    """Task name (`tcot list`)."""
     seed: int = 0
+    """Episode seed; the same seed and config replay bit-identically."""
     robot: str = "auto"
+    """A bundled robot name (`tcot list`; "auto" = the task's own robot), or the path of your own robot's
+    robot.toml (or its folder). Check your own with `tcot robot check PATH` (docs/robot_spec.md)."""
     controller: str = "computed_torque"
     ik: str = "mink"
     planner: str = "oracle"
@@ -101,28 +105,119 @@ class RunConfig:
 
 # --- loading stored configs ---------------------------------------------------------------------------
 
+MAX_CONFIG_BYTES = 256 * 1024
+"""Largest config file read [bytes]; real configs are a few kB (a 50 MB file is refused before parsing)."""
+MAX_CONFIG_NODES = 100_000
+"""Most values a config may hold once YAML aliases are expanded (an alias bomb expands to billions)."""
+
+
+def _no_duplicate_keys(node: yaml.MappingNode, where: str) -> None:
+    seen: dict = {}
+    for key, _ in node.value:
+        if isinstance(key, yaml.ScalarNode):
+            k = (key.tag, key.value)
+            if k in seen:
+                raise ConfigError(f"{where}: key {short_repr(key.value)} appears twice (line {seen[k] + 1} and line "
+                                  f"{key.start_mark.line + 1}); a repeated key would silently win, so it is refused")
+            seen[k] = key.start_mark.line
+
+
+def _check_yaml_nodes(root, where: str) -> None:
+    """Refuse alias bombs and duplicate keys on the composed node graph, before any value is built:
+    the expanded size is counted with shared (aliased) nodes counted once per use, memoised."""
+    sizes: dict[int, int] = {}
+    stack = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        if id(node) in sizes:
+            continue
+        children = ([c for kv in node.value for c in kv] if isinstance(node, yaml.MappingNode) else
+                    list(node.value) if isinstance(node, yaml.SequenceNode) else [])
+        if not done:
+            if isinstance(node, yaml.MappingNode):
+                _no_duplicate_keys(node, where)
+            stack.append((node, True))
+            stack.extend((c, False) for c in children if id(c) not in sizes)
+            if len(stack) > MAX_CONFIG_NODES:
+                raise ConfigError(f"{where}: more than {MAX_CONFIG_NODES} values (or nested too deep); "
+                                  f"a config holds a few hundred")
+            continue
+        total = 1
+        for c in children:
+            total += sizes.get(id(c), 1)
+            if total > MAX_CONFIG_NODES:
+                raise ConfigError(f"{where}: expands to more than {MAX_CONFIG_NODES} values (YAML aliases/anchors "
+                                  f"repeating each other?); a config holds a few hundred, refused")
+        sizes[id(node)] = total
+
+
+def _safe_yaml(text: str, where: str):
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)  # safe: python object tags are refused
+    try:
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        _check_yaml_nodes(root, where)
+        return loader.construct_document(root)
+    finally:
+        loader.dispose()
+
+
+def read_config_file(path: str | Path, *, what: str = "config file") -> Any:
+    """Parse a .yaml/.yml/.toml/.json file into plain data, bounded: the file must be a regular file of at
+    most MAX_CONFIG_BYTES; YAML may not repeat a key or expand (aliases) past MAX_CONFIG_NODES values;
+    nesting too deep is refused. Every problem is a ConfigError naming the file."""
+    p = Path(path)
+    where = f"{what} {str(p)!r}"
+    if not p.exists():
+        raise ConfigError(f"{where} does not exist")
+    if p.is_dir():
+        raise ConfigError(f"{where} is a directory; give the path of a .yaml, .toml or .json file")
+    if not p.is_file():
+        raise ConfigError(f"{where} is not a regular file (a device or pipe?); give a .yaml, .toml or .json file")
+    if p.suffix not in (".yaml", ".yml", ".toml", ".json"):
+        raise ConfigError(f"{where}: unknown format {p.suffix!r}; use .yaml, .toml or .json")
+    try:
+        with p.open("rb") as f:
+            raw = f.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{where} cannot be read: {exc.strerror or exc}") from exc
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{where} is larger than {MAX_CONFIG_BYTES // 1024} KiB; a config is a few kB, refused "
+                          f"before parsing")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{where} is not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+    try:
+        if p.suffix in (".yaml", ".yml"):
+            return _safe_yaml(text, where)
+        if p.suffix == ".toml":
+            return tomllib.loads(text)
+        return json.loads(text)
+    except ConfigError:
+        raise
+    except RecursionError as exc:
+        raise ConfigError(f"{where} is nested too deep to be a config") from exc
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, ValueError) as exc:  # ValueError: e.g. a 5000-digit integer
+        msg = str(exc)
+        mark = getattr(exc, "problem_mark", None)
+        lines = text.splitlines()
+        line = lines[mark.line] if mark is not None and mark.line < len(lines) else ""
+        if line.strip():  # the C parser's message has no snippet: quote the offending line (bounded)
+            msg += f"\n  line {mark.line + 1}: {line.strip()[:200]}"
+        raise ConfigError(f"{where} is malformed: {msg[:800]}{'...' if len(msg) > 800 else ''}") from exc
+
+
 def load_config_file(path: str | Path) -> RunConfig:
     """Load a RunConfig from .yaml/.yml/.toml/.json; errors name the file and the field."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"config file {str(p)!r} does not exist")
-    text = p.read_text()
-    try:
-        if p.suffix in (".yaml", ".yml"):
-            data = yaml.safe_load(text)  # safe_load refuses python object tags
-        elif p.suffix == ".toml":
-            data = tomllib.loads(text)
-        elif p.suffix == ".json":
-            data = json.loads(text)
-        else:
-            raise ConfigError(f"config file {str(p)!r}: unknown format {p.suffix!r}; use .yaml, .toml or .json")
-    except ConfigError:
-        raise
-    except (yaml.YAMLError, tomllib.TOMLDecodeError, ValueError) as exc:  # ValueError: e.g. a 5000-digit integer
-        raise ConfigError(f"config file {str(p)!r} is malformed: {exc}") from exc
+    data = read_config_file(p)
     if data is None:
         data = {}
     try:
         return from_mapping(RunConfig, data)
     except ConfigError as exc:
         raise ConfigError(f"config file {str(p)!r}: {exc}") from exc
+    except RecursionError as exc:
+        raise ConfigError(f"config file {str(p)!r} is nested too deep to be a config") from exc

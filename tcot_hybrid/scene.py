@@ -26,6 +26,10 @@ OBJECT_FRICTION = (1.0, 0.01, 0.001)
 OBJECT_SOLREF = (0.01, 1.0)
 
 
+MAX_VIDEO_PX = 4096  # [px] largest video side
+MAX_PLANNER_IMAGE_PX = 1024  # [px] largest planner image side (the shipped planner uses 128)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SceneConfig:
     """Scene and camera settings.
@@ -41,9 +45,14 @@ class SceneConfig:
     video_height: int = 240
 
     def __post_init__(self) -> None:
-        require_int("planner_image_px", self.planner_image_px, minimum=16)
-        require_int("video_width", self.video_width, minimum=16)
-        require_int("video_height", self.video_height, minimum=16)
+        for name, top in (("planner_image_px", MAX_PLANNER_IMAGE_PX), ("video_width", MAX_VIDEO_PX),
+                          ("video_height", MAX_VIDEO_PX)):
+            require_int(name, getattr(self, name), minimum=16)
+            if getattr(self, name) > top:
+                from tcot_hybrid.errors import ConfigError
+
+                raise ConfigError(f"{name} = {getattr(self, name)} px is above the {top} px maximum (an offscreen "
+                                  f"buffer that size takes gigabytes and minutes per frame)")
         if not isinstance(self.planner_camera, str) or not self.planner_camera:
             from tcot_hybrid.errors import ConfigError
 

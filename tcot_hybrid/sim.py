@@ -75,6 +75,7 @@ class Simulation:
         self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._fault: SimFault | None = None
+        self._time_offset = 0.0  # [s] simulated time lost to MuJoCo's own resets of a diverged state
 
     # --- episode lifecycle ------------------------------------------------------------------------
     def reset(self, rng: np.random.Generator) -> None:
@@ -88,6 +89,7 @@ class Simulation:
         self.set_gripper(False)  # after the task: LIBERO's reset clears every ctrl
         mujoco.mj_forward(m, d)
         self._fault = None
+        self._time_offset = 0.0
         d.warning.number[:] = 0
 
     def _finger_open(self) -> np.ndarray:
@@ -105,9 +107,13 @@ class Simulation:
     def step2(self, n_more: int) -> None:
         """Finish the current step, then ``n_more`` full steps with the control held."""
         m, d = self.model, self.data
+        t0 = d.time
         mujoco.mj_step2(m, d)
         for _ in range(n_more):
             mujoco.mj_step(m, d)
+        expected = t0 + (1 + n_more) * m.opt.timestep
+        if d.time < expected - 0.5 * m.opt.timestep:  # MuJoCo reset a diverged state (time back to 0)
+            self._time_offset += expected - d.time
         self._poll_warnings()
 
     def _poll_warnings(self) -> None:
@@ -116,12 +122,18 @@ class Simulation:
         counts = self.data.warning.number  # one array read; per-warning struct access costs 4x more
         if counts[_FATAL_IDX].any():
             kind = next(k for k in FATAL_WARNINGS if counts[int(k)])
-            self._fault = SimFault(float(self.data.time), kind.name, int(counts[int(kind)]))
+            self._fault = SimFault(self.time_s, kind.name, int(counts[int(kind)]))
             return
         # An object pushed through the table falls forever without any MuJoCo warning: a fault too.
         if self._object_bodies.size and \
                 self.data.xpos[self._object_bodies, 2].min() < self.support_z - OBJECT_FLOOR_DZ:
-            self._fault = SimFault(float(self.data.time), "OBJECT_BELOW_TABLE", 1)
+            self._fault = SimFault(self.time_s, "OBJECT_BELOW_TABLE", 1)
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since ``reset`` [s]. ``data.time`` restarts at 0 when MuJoCo resets a diverged
+        state by itself; this keeps counting."""
+        return float(self.data.time + self._time_offset)
 
     @property
     def fault(self) -> SimFault | None:

@@ -80,6 +80,7 @@ class Supervisor:
         self.resets = 0
         self.replans = 0
         self._ik_failures_at_plan = 0
+        self._infeasible_at_plan = 0
 
     def _event(self, step, p=None, reason=None, plan=None) -> dict:
         ev = {"kind": "supervisor", "step": step, "state": self.state}
@@ -148,9 +149,12 @@ class Supervisor:
     def _plan(self, step, mode, reason, executor) -> Decision:
         self.replans += step > 0
         self._ik_failures_at_plan = executor.ik_failures
+        self._infeasible_at_plan = getattr(executor, "plans_infeasible", 0)
         return Decision(mode, False, self._event(step, reason=reason, plan=mode))
 
     def _geometric_reason(self, executor) -> str | None:
+        if getattr(executor, "plans_infeasible", 0) > self._infeasible_at_plan:
+            return "ik_plan_infeasible"
         if executor.ik_failures > self._ik_failures_at_plan:
             return "ik_not_converged"
         if executor.plan_finished:

@@ -22,6 +22,7 @@ from tcot_hybrid.learning.checkpoint import (
     read_safetensors_header,
     save_checkpoint,
     sha256_bytes,
+    stamp_metadata,
     versions,
 )
 from tcot_hybrid.learning.model import ModelConfig, PlannerNet
@@ -60,14 +61,14 @@ def _inputs(b=2):
 
 
 def _rewrite(path, state=None, blob=None, meta_update=None):
-    """Replace the weights (and fix the recorded hash so only the intended fault remains)."""
+    """Replace the weights (and fix the recorded hashes so only the intended fault remains)."""
     if blob is None:
         blob = st_save(state)
     path.write_bytes(blob)
     meta = json.loads(meta_path(path).read_text())
     meta["weights_sha256"] = sha256_bytes(blob)
     meta.update(meta_update or {})
-    meta_path(path).write_text(json.dumps(meta))
+    meta_path(path).write_text(json.dumps(stamp_metadata(meta)))
 
 
 def test_round_trip_gives_identical_outputs(tmp_path, camera):
@@ -210,12 +211,12 @@ def test_metadata_missing_or_malformed_refused(ckpt):
         load_checkpoint(ckpt)
     meta = json.loads(text)
     del meta["robot"]
-    mp.write_text(json.dumps(meta))
+    mp.write_text(json.dumps(stamp_metadata(meta)))
     with pytest.raises(CheckpointError, match="lacks"):
         load_checkpoint(ckpt)
     meta = json.loads(text)
     meta["model"]["width"] = -3
-    mp.write_text(json.dumps(meta))
+    mp.write_text(json.dumps(stamp_metadata(meta)))
     with pytest.raises(CheckpointError, match="model config"):
         load_checkpoint(ckpt)
     mp.unlink()

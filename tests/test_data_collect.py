@@ -255,3 +255,33 @@ def test_collect_refuses_unknown_perturbation(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc != 0 and "earthquake" in err and "object_moved" in err
     assert not (tmp_path / "x.hdf5").exists()
+
+
+def test_image_every_renders_only_every_kth_sample_and_loaders_skip_the_rest(tmp_path):
+    """LIBERO frames cost 28-80 ms: --image-every renders every k-th sample and the last; the others keep their
+    state and track, marked in obs/image_valid, and never become training frames."""
+    from tcot_hybrid.learning.data import load_frames
+    from tcot_hybrid.data.labels import TrajectoryWindowConfig
+    from tcot_hybrid.learning.vocab import Vocabulary
+
+    p = tmp_path / "sparse.hdf5"
+    collect(RunConfig(), tasks=[TASK], seeds=[0, 1], out=p, workers=1, progress=False, image_every=4)
+    with DemoFile(p) as f:
+        name = f.mask("train")[0]
+        valid = f.image_valid(name)
+        T = f.info(name).num_samples
+        expect = (np.arange(T) % 4 == 0)
+        expect[-1] = True
+        np.testing.assert_array_equal(valid, expect)
+        images = f.images(name)
+        assert images[~valid].max() == 0 and all(images[t].max() > 0 for t in np.flatnonzero(valid))
+        track = f.read(name, ["obs/eef_uv_px"])["obs/eef_uv_px"]
+        assert np.isfinite(track).all() and len(track) == T  # labels still see the whole track
+        instr = f.info(name).instruction
+    frames = load_frames(p, "all", Vocabulary.build([instr]), windows=TrajectoryWindowConfig(), max_tokens=16,
+                         direct_horizon=4, frame_stride=2)
+    assert len(frames) > 0 and all(t % 4 == 0 or t == T - 1 for t in frames.t[frames.demo == 0])
+    assert frames.images.reshape(len(frames), -1).max(dim=1).values.min() > 0  # no black frame is trained on
+    with pytest.raises(ConfigError, match="image_every"):
+        collect(RunConfig(), tasks=[TASK], seeds=[0], out=tmp_path / "bad.hdf5", workers=1, progress=False,
+                image_every=0)

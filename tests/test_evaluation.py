@@ -160,3 +160,21 @@ def test_longest_tasks_are_scheduled_first():
     ordered = longest_first(jobs)
     limits = [make_task(j.cfg.task).time_limit_s for j in ordered]
     assert limits == sorted(limits, reverse=True) and sorted(j.key for j in ordered) == sorted(j.key for j in jobs)
+
+
+def test_several_ik_backends_get_a_side_by_side_table_with_time_and_tracking_error():
+    from tcot_hybrid.evaluation.reports import markdown
+
+    def rec(ik, seed, ok, t, err, fails=0, infeasible=0):
+        return {"task": "goal_cube_on_plate", "suite": "goal", "planner": "oracle", "mode": "global", "perturb": "none",
+                "robot": "panda", "controller": "computed_torque", "ik": ik, "seed": seed, "success": ok,
+                "success_time_s": t if ok else None, "sim_time_s": t, "max_tracking_error_rad": err,
+                "ik_failures": fails, "plans_infeasible": infeasible, "max_joint_limit_violation_rad": 0.0}
+    records = [rec("mink", 0, True, 4.0, 0.01), rec("mink", 1, True, 6.0, 0.03, fails=2),
+               rec("casadi", 0, True, 5.0, 0.02), rec("casadi", 1, False, 9.0, 0.04, infeasible=1)]
+    text = markdown({"cells": aggregate(records)})
+    assert "#### IK backends" in text
+    assert "| panda | mink | 1.000 [0.342, 1.000] n=2 | 5.0 | 0.02 | 2 | 0 | 0.0e+00 |" in text
+    assert "| panda | casadi | 0.500 [0.095, 0.905] n=2 | 7.0 | 0.03 | 0 | 1 | 0.0e+00 |" in text
+    one_ik = markdown({"cells": aggregate([r for r in records if r["ik"] == "mink"])})
+    assert "IK backends" not in one_ik

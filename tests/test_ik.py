@@ -89,8 +89,8 @@ def check_step(ik, q_prev: np.ndarray, q_new: np.ndarray, iters: int) -> tuple[i
 # -- registry and configuration ---------------------------------------------------------------------
 
 
-def test_registry_lists_both_backends_and_rejects_unknown_names():
-    assert list_ik() == ["mink", "pinocchio"]
+def test_registry_lists_the_backends_and_rejects_unknown_names():
+    assert list_ik() == ["casadi", "mink", "pinocchio"]
     with pytest.raises(ConfigError) as err:
         make_ik("trac_ik", spec("panda"))
     assert "trac_ik" in str(err.value) and "mink" in str(err.value) and "pinocchio" in str(err.value)

@@ -72,6 +72,7 @@ def test_tiny_training_lowers_loss_and_writes_checkpoint(demo_file, tmp_path, ca
     assert report["split"] == "train" and 0.0 <= report["result"]["detect"]["auroc"] <= 1.0
     section = md.read_text().split("<!-- planner_eval_train:start -->")[1].split("<!-- planner_eval_train:end -->")[0]
     assert "Success detection: AUROC" in section and str(res.checkpoint) in section
+    assert "training demos" in section and "held-out" not in section  # it trained on them
     for bad in (["--stem", "../escape"], ["--section", "nowhere"]):  # refused before any evaluation
         with pytest.raises(SystemExit):
             evaluate_main(["--checkpoint", str(res.checkpoint), "--data", str(demo_file), "--readme", str(md), *bad])

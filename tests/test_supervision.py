@@ -107,12 +107,14 @@ def test_stop_match_radius_is_validated():
         ExecutorConfig(stop_match_m=0.0)
 
 
-def test_glsr_hands_a_drawer_pull_over_to_local_plans():
+@pytest.mark.parametrize("seed", [500, 501, 502])  # development (tuning) seeds, docs/seeds.md
+def test_glsr_hands_a_drawer_pull_over_to_local_plans(seed):
     """Regression: when every replan (each t_l steps) restarted the wait at a stop its local plan had moved by
-    1-4 cm, GLSR's first local plan (step 24, approaching the handle) left the arm hovering above the handle
-    without ever closing the gripper (shipped checkpoint; ExecutorConfig.stop_match_m)."""
-    cfg = RunConfig(task="goal_open_drawer", seed=1000, planner="learned", supervisor=SupervisorConfig(mode="glsr"))
+    1-4 cm, GLSR's first local plan (approaching the handle) left the arm hovering above the handle without
+    ever closing the gripper (shipped checkpoint; ExecutorConfig.stop_match_m): 21.8 s or never, where the
+    hand-over takes under 5 s."""
+    cfg = RunConfig(task="goal_open_drawer", seed=seed, planner="learned", supervisor=SupervisorConfig(mode="glsr"))
     rec = EpisodeRunner(cfg).run()
     assert rec["success"] and rec["fault"] is None
-    assert rec["success_time_s"] < 6.0  # frozen global alone: 3.8 s; hovering: 21.8 s (seed 1001: never)
+    assert rec["success_time_s"] < 10.0  # not hovering
     assert any(e.get("plan") == "local" for e in rec["events"] if e["kind"] == "supervisor")

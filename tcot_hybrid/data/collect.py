@@ -16,9 +16,11 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")  # before anything imports mujoco (spawned workers too)
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import shutil  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -28,10 +30,14 @@ import numpy as np  # noqa: E402
 from tcot_hybrid.data.dataset import (  # noqa: E402
     DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, VALID_EVERY, DemoFile, env_difference, image_key, is_valid_seed,
 )
+from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
-TRAIN_SEED_LIMIT = 1000  # seeds >= this are evaluation seeds: never collect training data on them
+TRAIN_SEED_LIMIT = 1000  # workcell seeds >= this are evaluation seeds: never collect training data on them
+# LIBERO: sampled layouts 0-49999 are for training and tuning, 90000+ report (docs/seeds.md); the shipped init
+# states are the test set and are never collected.
+LIBERO_TRAIN_SEED_LIMIT = 50000
 GZIP_LEVEL = 4  # measured on 128x128 frames: 6.5 KB/frame vs 10.5 KB with lzf, same read speed
 
 
@@ -61,8 +67,15 @@ def _quat_wxyz(xmat: np.ndarray) -> np.ndarray:
     return q
 
 
-def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress=None) -> DemoRecord:
-    """Run one episode of ``cfg`` and return its samples (see module doc). Raises on a crash."""
+def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress=None,
+                image_every: int = 1) -> DemoRecord:
+    """Run one episode of ``cfg`` and return its samples (see module doc). Raises on a crash.
+
+    ``image_every`` > 1 renders the planner image only at every k-th sample and the last one (rendering a
+    LIBERO scene costs 28-80 ms a frame, the rest of a sample microseconds): the other samples keep their
+    robot state and track (labels need the whole track) with a black frame, and ``obs/image_valid`` marks
+    the rendered ones. Loaders never train on a frame without an image."""
+    require_int("image_every", image_every, minimum=1)
     from tcot_hybrid.episode import EpisodeRunner
 
     t0 = time.perf_counter()
@@ -79,8 +92,9 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
             return
         tcp = sim.tcp_pos()
         uv, depth = cam.project(tcp[None])
+        rendered = len(rows) % image_every == 0
         rows.append({
-            "image": sim.render(camera, px, px),
+            "image": sim.render(camera, px, px) if rendered else None, "rendered": rendered,
             "q": sim.q, "qd": sim.qd, "eef_pos": tcp,
             "eef_quat": _quat_wxyz(sim.data.site_xmat[sim.ee_site]),
             "gripper_qpos": sim.data.qpos[sim.gripper_qpos].copy(),
@@ -94,6 +108,9 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     rec = runner.run(progress, steps_after_success=steps_after_success)
     if not steps_seen or steps_seen[-1] < runner.steps:  # the final state was not sampled (abort path)
         sample(runner, runner.steps)
+    if not rows[-1]["rendered"]:  # the last sample is the state the episode ended in: always render it
+        rows[-1]["image"], rows[-1]["rendered"] = sim.render(camera, px, px), True
+    blank = np.zeros((px, px, 3), np.uint8)
     n = len(rows)
     eef = np.array([r["eef_pos"] for r in rows], dtype=np.float32)
     grip = np.array([r["gripper_closed"] for r in rows], dtype=np.uint8)
@@ -103,7 +120,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     actions[:-1, 3] = grip[1:]
     actions[-1, 3] = grip[-1]  # the last sample holds: no motion, same gripper
     arrays = {
-        "obs/" + image_key(camera): np.stack([r["image"] for r in rows]).astype(np.uint8),
+        "obs/" + image_key(camera): np.stack([blank if r["image"] is None else r["image"] for r in rows]).astype(np.uint8),
         "obs/robot0_joint_pos": np.array([r["q"] for r in rows], dtype=np.float32),
         "obs/robot0_joint_vel": np.array([r["qd"] for r in rows], dtype=np.float32),
         "obs/robot0_eef_pos": eef,
@@ -115,6 +132,8 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         "task_success": succ,
         "actions": actions,
     }
+    if image_every > 1:
+        arrays["obs/image_valid"] = np.array([r["rendered"] for r in rows], dtype=np.uint8)
     hits = np.flatnonzero(succ)
     fired = [e["step"] for e in s.executor.events if e["kind"] == "perturbation"]
     # first plan made at or after the perturbation: from there on the track shows the recovery
@@ -139,10 +158,11 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     return DemoRecord(attrs=attrs, arrays=arrays, env_args=env_args, wall_s=time.perf_counter() - t0)
 
 
-def _worker(cfg):
+def _worker(job):
     """Pool entry point: never raises (a crash is reported back and that pair is retried next run)."""
+    cfg, image_every = job
     try:
-        return "ok", record_demo(cfg)
+        return "ok", record_demo(cfg, image_every=image_every)
     except Exception as exc:  # noqa: BLE001 - reported by the parent
         return "crash", (cfg.task, cfg.seed, f"{type(exc).__name__}: {exc}")
 
@@ -283,9 +303,23 @@ class CollectSummary:
                 f"masks: {self.n_train} train / {self.n_valid} valid")
 
 
+MIN_FREE_BYTES = 16 * 2**20
+"""[bytes] free space kept on the output's disk beyond one demo's uncompressed size: HDF5 crashes the
+process when a write hits a full disk, so collection stops before that with a clear error."""
+
+
+def _check_room(path: Path, rec, written: int) -> None:
+    need = MIN_FREE_BYTES + (sum(a.nbytes for a in rec.arrays.values()) if rec is not None else 0)
+    free = shutil.disk_usage(path.parent).free
+    if free < need:
+        raise DatasetError(f"the disk holding {path} is (nearly) full: {free / 2**20:.1f} MiB free, a demo needs up "
+                           f"to {need / 2**20:.1f} MiB; stopped before writing. The {written} demos written in this "
+                           f"run and all earlier ones are kept; free space and re-run the same command to resume")
+
+
 def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, workers: int = 2,
             valid_every: int = VALID_EVERY, compression: str = "gzip", progress: bool = True,
-            perturbs: list[str] | None = None) -> CollectSummary:
+            perturbs: list[str] | None = None, image_every: int = 1) -> CollectSummary:
     """Collect one episode per (task, seed, perturbation) not yet in ``out`` (resumable). ``perturbs``
     defaults to the base config's perturbation. Returns a summary."""
     from tqdm import tqdm
@@ -297,10 +331,12 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         raise ConfigError(f"valid_every must be >= 2 (every seed would be validation), got {valid_every}")
     if compression not in ("lzf", "gzip"):
         raise ConfigError(f"compression = {compression!r} is not valid; choose one of lzf, gzip")
+    require_int("image_every", image_every, minimum=1)
     t0 = time.perf_counter()
     h5 = _open_for_append(path)
     size0 = path.stat().st_size
     written = failed = samples = 0
+    write_failed = False
     crashes: list = []
     n_train = n_valid = 0
     try:
@@ -315,10 +351,10 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         pool = None
         try:
             if workers == 1 or len(cfgs) <= 1:
-                results = map(_worker, cfgs)
+                results = map(_worker, [(c, image_every) for c in cfgs])
             else:
                 pool = mp.get_context("spawn").Pool(min(workers, len(cfgs)), maxtasksperchild=40)
-                results = pool.imap_unordered(_worker, cfgs, chunksize=1)
+                results = pool.imap_unordered(_worker, [(c, image_every) for c in cfgs], chunksize=1)
             with tqdm(total=len(pairs), initial=len(pairs) - len(todo), desc=f"collect {path.name}", unit="demo",
                       disable=not progress) as bar:
                 for status, payload in results:
@@ -327,7 +363,13 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                         bar.write(f"crash: task={payload[0]} seed={payload[1]}: {payload[2]}")
                     else:
                         _check_env(path, h5, payload.env_args)
-                        write_demo(h5, payload, compression=compression)
+                        _check_room(path, payload, written)
+                        try:
+                            write_demo(h5, payload, compression=compression)
+                        except OSError as exc:  # HDF5 write failed (e.g. the disk filled up under us)
+                            write_failed = True
+                            raise DatasetError(f"writing a demo to {path} failed ({exc}); the {written} demos "
+                                               f"written before are kept, re-run the same command to resume") from exc
                         written += 1
                         failed += not payload.attrs["success"]
                         samples += payload.attrs["num_samples"]
@@ -338,15 +380,20 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                 pool.join()
         present = len(done)
     finally:
-        try:
-            stale = (written or "mask" not in h5
-                     or int(h5["mask"].attrs.get("valid_every", -1)) != valid_every)
-            if "env_args" in h5["data"].attrs and stale:
-                n_train, n_valid = write_masks(h5, valid_every=valid_every)
-            elif "mask" in h5:
-                n_train, n_valid = len(h5["mask/train"]), len(h5["mask/valid"])
-        finally:
-            h5.close()
+        if write_failed:  # don't write more into a file whose last write failed; just close it
+            with contextlib.suppress(Exception):
+                h5.close()
+        else:
+            try:
+                stale = (written or "mask" not in h5
+                         or int(h5["mask"].attrs.get("valid_every", -1)) != valid_every)
+                if "env_args" in h5["data"].attrs and stale:
+                    _check_room(path, None, written)
+                    n_train, n_valid = write_masks(h5, valid_every=valid_every)
+                elif "mask" in h5:
+                    n_train, n_valid = len(h5["mask/train"]), len(h5["mask/valid"])
+            finally:
+                h5.close()
     wall = time.perf_counter() - t0
     return CollectSummary(path=path, requested=len(pairs), already_present=present, written=written,
                           failed_episodes=failed, crashes=crashes, n_train=n_train, n_valid=n_valid, wall_s=wall,
@@ -361,8 +408,9 @@ def _parser() -> argparse.ArgumentParser:
         "Re-running with the same --out keeps the demos already there and collects only missing "
         "(task, seed) pairs."))
     p.add_argument("--tasks", help="comma-separated task names (default: all tasks)")
-    p.add_argument("--suite", help="every task of this suite (instead of --tasks)")
-    p.add_argument("--robot", help="robot name (default: the config's, panda)")
+    p.add_argument("--suite", help="every task of these comma-separated suites (instead of --tasks); LIBERO "
+                                   "suites collect sampled layouts, never the shipped init states (the test set)")
+    p.add_argument("--robot", help="robot name (default: the tasks' own: panda, libero_panda on LIBERO)")
     p.add_argument("--controller", help="low-level controller (default: the config's)")
     p.add_argument("--ik", help="IK backend (default: the config's)")
     p.add_argument("--planner", default=None,
@@ -379,53 +427,71 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"seed %% N == 0 goes to the validation mask (default {VALID_EVERY})")
     p.add_argument("--compression", default="gzip", choices=("lzf", "gzip"),
                    help="image compression (default gzip level 4: ~40%% smaller than lzf, same read speed)")
+    p.add_argument("--image-every", type=int, default=1,
+                   help="render the planner image only every N-th sample and the last (default 1: every sample); "
+                        "the others keep state and track, marked in obs/image_valid (LIBERO frames cost 28-80 ms)")
     p.add_argument("--config", type=Path, help="YAML/TOML/JSON RunConfig shared by every episode")
     p.add_argument("--out", type=Path, help="output file (default data/demos_<robot>.hdf5)")
     p.add_argument("--allow-eval-seeds", action="store_true",
-                   help=f"allow seeds >= {TRAIN_SEED_LIMIT} (evaluation seeds; never train on them)")
+                   help=f"allow seeds >= {TRAIN_SEED_LIMIT} ({LIBERO_TRAIN_SEED_LIMIT} on LIBERO) (evaluation seeds; "
+                        "never train on them)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
 def cmd_collect(argv: list[str]) -> int:
     from tcot_hybrid.episode import validate_names
-    from tcot_hybrid.errors import unknown_name
     from tcot_hybrid.perturbations import PerturbConfig
     from tcot_hybrid.run_config import RunConfig, load_config_file
-    from tcot_hybrid.tasks import SUITES, list_tasks
+    from tcot_hybrid.tasks import default_robot, is_libero_task, list_tasks, suite_task_names
 
     args = _parser().parse_args(argv)
     base = load_config_file(args.config) if args.config else RunConfig()
-    over = {k: getattr(args, k) for k in ("robot", "controller", "ik", "planner", "checkpoint")
-            if getattr(args, k) is not None}
-    if args.mode is not None:
-        over["supervisor"] = dataclasses.replace(base.supervisor, mode=args.mode)
-    base = dataclasses.replace(base, **over)
     if args.suite and args.tasks:
         raise ConfigError("give --suite or --tasks, not both")
     all_tasks = list_tasks()
-    if args.suite is not None and args.suite not in SUITES:
-        raise ConfigError(unknown_name("suite", args.suite, SUITES))
     if args.suite:
-        tasks = [t.name for t in all_tasks if t.suite == args.suite]
+        tasks = [name for suite in args.suite.split(",") if suite.strip() for name in suite_task_names(suite.strip())]
     elif args.tasks:
         tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
     else:
         tasks = [t.name for t in all_tasks]
+    worlds = {is_libero_task(t) for t in tasks}
+    if len(worlds) > 1:
+        raise ConfigError("one demo file holds one robot and world: collect the workcell's and LIBERO's tasks into "
+                          "separate files (two runs)")
+    libero = worlds == {True}
+    over = {k: getattr(args, k) for k in ("robot", "controller", "ik", "planner", "checkpoint")
+            if getattr(args, k) is not None}
+    if "robot" not in over and base.robot == default_robot(base.task):  # robot auto: the tasks' own
+        over["robot"] = default_robot(tasks[0])
+    if args.mode is not None:
+        over["supervisor"] = dataclasses.replace(base.supervisor, mode=args.mode)
+    if libero:
+        if base.init == "shipped":
+            raise ConfigError("LIBERO's shipped init states are the test set (docs/seeds.md): training data uses "
+                              "sampled layouts (init: sampled)")
+        over["init"] = "sampled"
+    base = dataclasses.replace(base, **over)
     if args.episodes_per_task < 1 or args.seed_start < 0:
         raise ConfigError(f"--episodes-per-task must be >= 1 and --seed-start >= 0; got "
                           f"{args.episodes_per_task}, {args.seed_start}")
     seeds = list(range(args.seed_start, args.seed_start + args.episodes_per_task))
-    if seeds[-1] >= TRAIN_SEED_LIMIT and not args.allow_eval_seeds:
-        raise ConfigError(f"seeds {seeds[0]}..{seeds[-1]} reach the evaluation range (>= {TRAIN_SEED_LIMIT}); "
-                          f"training data must use seeds < {TRAIN_SEED_LIMIT} (--allow-eval-seeds to override)")
+    limit = LIBERO_TRAIN_SEED_LIMIT if libero else TRAIN_SEED_LIMIT
+    if seeds[-1] >= limit and not args.allow_eval_seeds:
+        raise ConfigError(f"seeds {seeds[0]}..{seeds[-1]} reach the evaluation range (>= {limit}); "
+                          f"training data must use seeds < {limit} (--allow-eval-seeds to override)")
     for t in tasks:
         validate_names(dataclasses.replace(base, task=t))
     out = args.out or Path("data") / f"demos_{base.robot}.hdf5"
+    from tcot_hybrid.jsonio import check_output_file
+
+    check_output_file(out, what="--out")  # read-only, a directory, a full disk: found before any episode
     perturbs = [p.strip() for p in args.perturb.split(",") if p.strip()] if args.perturb else None
     for name in perturbs or []:
         PerturbConfig(name=name)  # unknown names fail here, listing the valid ones
     summary = collect(base, tasks=tasks, seeds=seeds, out=out, workers=args.workers, valid_every=args.valid_every,
+                      image_every=args.image_every,
                       compression=args.compression, progress=not args.quiet, perturbs=perturbs)
     print(summary.line())
     for task, seed, msg in summary.crashes:

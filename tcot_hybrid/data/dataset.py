@@ -8,6 +8,8 @@ Layout (``docs/dataset.md`` describes every field)::
                                  recover_step, source,
                                  success, t_success, num_samples
         obs/<camera>_image, obs/robot0_*, obs/eef_uv_px, obs/eef_depth_m, task_success, actions
+        obs/image_valid (optional, uint8 (T,)): which samples have a rendered image (``tcot collect
+                         --image-every``); absent = all of them
     /mask/train, /mask/valid   demo names (bytes), split by seed
 
 Every error is a :class:`~tcot_hybrid.errors.DatasetError` naming the file and what is wrong; no raw
@@ -40,6 +42,7 @@ OBS_SPEC: dict[str, tuple[type, tuple]] = {
     "eef_uv_px": (np.float32, (2,)),
     "eef_depth_m": (np.float32, ()),
 }
+IMAGE_VALID = "obs/image_valid"  # optional per-sample mask of rendered images
 TOP_SPEC: dict[str, tuple[type, tuple]] = {
     "task_success": (np.uint8, ()),
     "actions": (np.float32, (4,)),
@@ -265,6 +268,8 @@ class DemoFile:
         specs = {f"obs/{k}": v for k, v in OBS_SPEC.items()}
         specs[self.image_key] = (np.uint8, (h, w, 3))
         specs.update(TOP_SPEC)
+        if IMAGE_VALID in g:
+            specs[IMAGE_VALID] = (np.uint8, ())
         for key, (dtype, trailing) in specs.items():
             if key not in g:
                 raise self._fail(f"{where} lacks dataset {key!r}")
@@ -322,7 +327,22 @@ class DemoFile:
             except (OSError, ValueError, RuntimeError) as exc:
                 raise DatasetError(f"demo file {self.path}: reading /data/{name}/{key} failed ({exc}); "
                                    f"the file is truncated or corrupt") from exc
+            arr = out[key]
+            if arr.dtype.kind == "f" and not np.isfinite(arr).all():  # else training blames the learning rate
+                bad = np.argwhere(~np.isfinite(arr))[0]
+                raise DatasetError(f"demo file {self.path}: /data/{name}/{key} holds a non-finite value "
+                                   f"({arr[tuple(bad)]} at sample {int(bad[0])}); the demo is corrupt: "
+                                   f"re-collect it or drop it from the masks")
         return out
+
+    def image_valid(self, name: str) -> np.ndarray:
+        """(T,) bool: which samples of one demo have a rendered planner image (all, unless collected with
+        ``--image-every``)."""
+        self._check_open()
+        info = self.info(name)
+        if IMAGE_VALID not in self._h5["data"][name]:
+            return np.ones(info.num_samples, bool)
+        return self.read(name, [IMAGE_VALID])[IMAGE_VALID].astype(bool)
 
     def images(self, name: str) -> np.ndarray:
         """(T, H, W, 3) uint8 planner-camera frames of one demo."""

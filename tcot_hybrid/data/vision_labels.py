@@ -103,6 +103,11 @@ def track_demos(demo_file, names: list[str], cfg: VisionLabelConfig = VisionLabe
     """Steps 1-2 (detect in frame 0, track) for demos ``names`` of an open :class:`DemoFile`."""
     out = {}
     for name in names:
+        if not demo_file.image_valid(name).all():
+            from tcot_hybrid.errors import DatasetError
+
+            raise DatasetError(f"demo file {demo_file.path}: {name} was collected with --image-every > 1; the "
+                               "vision path tracks the gripper through every frame (collect it with --image-every 1)")
         arr = demo_file.read(name, [demo_file.image_key, "obs/robot0_eef_pos", "obs/robot0_eef_quat"])
         tr = track_marker(arr[demo_file.image_key], cfg.marker, cfg.tracker)
         X = arr["obs/robot0_eef_pos"].astype(float)

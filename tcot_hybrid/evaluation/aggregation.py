@@ -47,6 +47,8 @@ def aggregate(records: list[dict]) -> list[dict]:
                     mean_tracking_error_rad=_mean([r.get("max_tracking_error_rad") for r in recs]),
                     max_joint_limit_violation_rad=max(r.get("max_joint_limit_violation_rad", 0.0) for r in recs),
                     max_velocity_ratio=round(max(r.get("max_velocity_ratio", 0.0) for r in recs), 4),
+                    ik_not_converged=sum(int(r.get("ik_failures") or 0) for r in recs),
+                    plans_infeasible=sum(int(r.get("plans_infeasible") or 0) for r in recs),
                     failed_seeds=sorted(r["seed"] for r in recs if not r["success"]))
         cells.append(cell)
     return cells

@@ -1,4 +1,5 @@
-"""Evaluation reports as Markdown: every cell, the paper's Table 1 and Table 4 forms, detector figures.
+"""Evaluation reports as Markdown: every cell, the paper's Table 1 and Table 4 forms, IK backends side by side,
+detector figures.
 
 Success is written as the rate with its Wilson 95 % interval and n (``0.90 [0.60, 0.98] n=10``): at the
 n of these tables a normal-approximation ``± s.e.`` collapses to ``± 0.00`` at 0/n and n/n. A perturbed
@@ -54,6 +55,30 @@ def perturbation_notes(cells: list[dict]) -> list[str]:
     return lines
 
 
+def ik_table(cells: list[dict]) -> list[str]:
+    """Markdown lines comparing IK backends (only when an evaluation ran more than one): per robot and backend,
+    success, mean episode time, mean of the episodes' largest tracking error, IK failures, worst limit violation."""
+    if len({c["ik"] for c in cells}) < 2:
+        return []
+    groups: dict[tuple, list] = defaultdict(list)
+    for c in cells:
+        groups[(c["robot"], c["ik"])].append(c)
+    lines = ["", "#### IK backends", "",
+             "| robot | ik | success [Wilson 95 % interval] n | mean episode time [s] | mean tracking error [rad] | "
+             "waypoints not converged | plans infeasible | max limit viol. [rad] |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (robot, ik), group in sorted(groups.items()):
+        def weighted(key):
+            pairs = [(c[key], c["episodes"]) for c in group if c.get(key) is not None]
+            return round(sum(v * w for v, w in pairs) / sum(w for _, w in pairs), 4) if pairs else None
+
+        lines.append(f"| {robot} | {ik} | {Rate(group).text(3)} | {weighted('mean_episode_time_s')} | "
+                     f"{weighted('mean_tracking_error_rad')} | {sum(c.get('ik_not_converged', 0) for c in group)} | "
+                     f"{sum(c.get('plans_infeasible', 0) for c in group)} | "
+                     f"{max(c['max_joint_limit_violation_rad'] for c in group):.1e} |")
+    return lines
+
+
 def markdown(result: dict, *, with_cells: bool = True) -> str:
     """The evaluation as Markdown: every cell (optional), Table 1 and Table 4 forms, detector metrics."""
     cells = result["cells"]
@@ -87,6 +112,7 @@ def markdown(result: dict, *, with_cells: bool = True) -> str:
         vals = [Rate(by_suite[s]).text() if by_suite.get(s) else "–" for s in suites]
         avg = Rate([c for s in suites for c in by_suite.get(s, [])])
         lines.append("| " + " | ".join(key) + " | " + " | ".join(vals) + f" | {avg.text(3)} | {avg.fired_text()} |")
+    lines += ik_table(cells)
     # Table 4: ablation of planning modes (averaged over suites), per perturbation.
     abl: dict[tuple, list] = defaultdict(list)
     for c in cells:

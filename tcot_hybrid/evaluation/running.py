@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
 from tcot_hybrid.evaluation.aggregation import aggregate, detector_metrics
 from tcot_hybrid.evaluation.jobs import Job
 from tcot_hybrid.evaluation.reports import markdown
@@ -33,10 +34,7 @@ def run_job(job: Job) -> dict:
         # post-success probes of the detector (false alarms) only where the simulator ended the episode
         probe = c.supervisor.mode.startswith("glsr") and c.stop_on == "simulator"
         rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
-        rec.pop("config", None)
-        keep = ("supervisor", "detector", "stop_check", "perturbation", "sim_fault", "ik_not_converged",
-                "plan_rejected", "scene_reset", "tracking_reflex", "reference_brake", "safety")
-        rec["events"] = [e for e in rec["events"] if e["kind"] in keep or e["kind"].startswith("safety")]
+        rec.pop("config", None)  # every event `tcot run` records is kept: a failure is diagnosed without a re-run
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure
         rec = {"task": c.task, "planner": c.planner, "mode": c.supervisor.mode, "robot": c.robot,
                "controller": c.controller, "ik": c.ik, "seed": c.seed, "success": False,
@@ -90,8 +88,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
 
     from tcot_hybrid.tasks import make_task
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output_dir(out_dir)
     log = out / "episodes.jsonl"
     done = _done_keys(log)
     jobs = [dataclasses.replace(j, fixed_key=j.key) for j in jobs]  # hashed once, here: workers reuse it
@@ -122,8 +119,8 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     cells = aggregate(records)
     result = {"cells": cells, "episodes": len(records), "ran_now": len(todo), "wall_time_s": round(wall, 2),
               "workers": workers, "detector": detector_metrics(records)}
-    (out / "eval.json").write_text(json.dumps(result, indent=2))
-    (out / "eval.md").write_text(markdown(result))
+    atomic_write_text(out / "eval.json", json.dumps(result, indent=2))
+    atomic_write_text(out / "eval.md", markdown(result))
     return result
 
 

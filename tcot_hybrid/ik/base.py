@@ -7,19 +7,24 @@ ordinary non-convergence. What every backend guarantees (checked in ``tests/test
 - the returned ``q`` is finite;
 - it lies inside ``[q_min + limit_margin_rad, q_max - limit_margin_rad]``, or, when the seed was
   outside that box, no farther out than the seed (the seed is walked inward at <= v_max per step);
-- every iteration moves each joint by at most ``v_max * velocity_scale * step_dt_s``.
+- every iteration moves each joint by at most ``v_max * velocity_scale * step_dt_s`` (the iterative
+  backends mink and pinocchio; casadi solves for the configuration directly, always inside the box,
+  and Ruckig bounds the speed of the motion toward it).
+
+Backends with ``solves_plans = True`` (casadi) also solve a whole plan at once: ``solve_plan``.
 """
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import numpy as np
 
 from tcot_hybrid.config import (
     require_choice,
+    require_finite,
     require_int,
     require_nonnegative,
     require_positive,
@@ -34,7 +39,8 @@ CONVERGED = "converged"
 MAX_ITERS = "max_iters"
 QP_INFEASIBLE = "qp_infeasible"
 NON_FINITE = "non_finite"
-STATUSES: tuple[str, ...] = (CONVERGED, MAX_ITERS, QP_INFEASIBLE, NON_FINITE)
+INFEASIBLE = "infeasible"  # whole-plan solve: some waypoint cannot be met within the tolerances
+STATUSES: tuple[str, ...] = (CONVERGED, MAX_ITERS, QP_INFEASIBLE, NON_FINITE, INFEASIBLE)
 
 POSTURE_TARGETS: tuple[str, ...] = ("home", "seed")
 
@@ -46,6 +52,80 @@ def _qp_solvers() -> list[str]:
     import qpsolvers
 
     return list(qpsolvers.available_solvers)
+
+
+WARM_STARTS: tuple[str, ...] = ("current", "pinocchio", "mink")
+ORIENTATION_MODES: tuple[str, ...] = ("hard", "soft")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CasadiConfig:
+    """Whole-plan IK (backend ``casadi``): every waypoint of a plan solved jointly with IPOPT.
+
+    Minimise  travel_weight * sum_i |q_i - q_{i-1}|^2 + posture_weight * sum_i |q_i - q_posture|^2
+    subject to: TCP position of waypoint i = its target (hard); TCP rotation within ``rot_tol_rad``
+    of its target (``orientation = "hard"``) or ``orientation_weight * angle^2`` added to the cost
+    (``"soft"``); joints inside the limits minus ``limit_margin_rad`` (hard, the same box as the other
+    backends); TCP and every moving joint origin at least ``min_height_m`` above the support surface.
+    q_0 is the configuration the plan starts from; q_posture follows ``posture_target``.
+
+    travel_weight:      [1/rad^2] weight of joint travel between consecutive waypoints. Up: shorter,
+                        more consistent motions (one arm branch for the whole plan); 0: posture only.
+    posture_weight:     [1/rad^2] weight of the pull toward the posture target. Up: elbow stays near
+                        home; down: less travel. Keep it well below travel_weight.
+    orientation:        "hard" (rotation error <= rot_tol_rad is a constraint) or "soft" (a cost with
+                        orientation_weight; a waypoint then counts as met on its position alone).
+    orientation_weight: [1/rad^2] weight of the squared rotation error with orientation = "soft". Up:
+                        closer to the target rotation; down: more slack for reach.
+    min_height_m:       [m] the TCP and every moving joint origin stay at least this far above the
+                        support surface (hard). Up: more clearance, low grasps become infeasible; down:
+                        lets the hand reach lower.
+    support_z_m:        [m] height of the support surface (table top) in the IK frame; ``solve_plan``
+                        may override it per plan.
+    max_iters:          IPOPT iterations per solve (a plan takes one solve, two when the first fails).
+                        Up: fewer plans given up; down: bounded solve time.
+    tol:                [-] IPOPT's convergence tolerance (scaled KKT error). Down: more accurate optimum
+                        of the cost (the targets are constraints either way), more iterations.
+    warm_start:         first initial guess: "current" (every waypoint at the start configuration),
+                        "pinocchio" or "mink" (that backend's per-waypoint solutions, chained). When the
+                        solve from it fails, the other kind is tried once ("current" <-> the chain): they
+                        reach different arm branches and each solves plans the other does not.
+    max_waypoints:      largest plan accepted (bounds the NLP size and memory).
+    max_time_s:         [s] wall-clock cap per IPOPT solve; None = none (runs stay reproducible: only
+                        max_iters bounds the work).
+    """
+
+    travel_weight: float = 1.0
+    posture_weight: float = 0.01
+    orientation: str = "hard"
+    orientation_weight: float = 100.0
+    min_height_m: float = 0.0
+    support_z_m: float = 0.0
+    max_iters: int = 200
+    tol: float = 1e-8
+    warm_start: str = "pinocchio"
+    max_waypoints: int = 256
+    max_time_s: float | None = None
+
+    def __post_init__(self) -> None:
+        p = "ik_params.casadi."
+        for name in ("travel_weight", "posture_weight"):
+            require_nonnegative(p + name, getattr(self, name))
+        if self.travel_weight + self.posture_weight <= 0.0:
+            raise ConfigError(f"{p}travel_weight + {p}posture_weight must be > 0 (got {self.travel_weight} and "
+                              f"{self.posture_weight}): the cost needs at least one of them")
+        require_choice(p + "orientation", self.orientation, ORIENTATION_MODES)
+        require_positive(p + "orientation_weight", self.orientation_weight)
+        for name in ("min_height_m", "support_z_m"):
+            require_finite(p + name, getattr(self, name))
+            if abs(getattr(self, name)) > 10.0:
+                raise ConfigError(f"{p}{name} must be within +-10 m, got {getattr(self, name)!r}")
+        require_int(p + "max_iters", self.max_iters, minimum=1)
+        require_positive(p + "tol", self.tol)
+        require_choice(p + "warm_start", self.warm_start, WARM_STARTS)
+        require_int(p + "max_waypoints", self.max_waypoints, minimum=1)
+        if self.max_time_s is not None:
+            require_positive(p + "max_time_s (or null: no cap)", self.max_time_s)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,6 +166,8 @@ class IKConfig:
                        than that do not converge. Off by default: grasps at z ~ 0.02 need the fingertips
                        near the table.
     table_clearance_m: hand/finger distance to keep from the table with collision_avoidance [m].
+    casadi:            settings of the whole-plan backend (:class:`CasadiConfig`); the fields above that
+                       it uses: pos_tol_m, rot_tol_rad, posture_target, limit_margin_rad.
     """
 
     max_iters: int = 200
@@ -101,6 +183,7 @@ class IKConfig:
     limit_margin_rad: float = 0.02
     collision_avoidance: bool = False
     table_clearance_m: float = 0.005
+    casadi: CasadiConfig = field(default_factory=CasadiConfig)
 
     def __post_init__(self) -> None:
         require_int("max_iters", self.max_iters, minimum=1)
@@ -114,6 +197,8 @@ class IKConfig:
         require_choice("solver", self.solver, _qp_solvers())
         if not isinstance(self.collision_avoidance, bool):
             raise ConfigError(f"collision_avoidance must be a bool, got {self.collision_avoidance!r}")
+        if not isinstance(self.casadi, CasadiConfig):
+            raise ConfigError(f"casadi must be a CasadiConfig (ik_params.casadi.*), got {self.casadi!r}")
 
 
 class IKTarget(NamedTuple):
@@ -194,6 +279,7 @@ class IKSolver(ABC):
 
     name: ClassVar[str]
     supports_collision_avoidance: ClassVar[bool] = False
+    solves_plans: ClassVar[bool] = False  # has solve_plan(): all waypoints of a plan at once
 
     def __init__(self, spec: RobotSpec, config: IKConfig | None = None) -> None:
         self.spec = spec
@@ -379,6 +465,6 @@ def check_ik_options(backend: type[IKSolver], config: IKConfig) -> None:
 
 
 def make_ik(name: str, spec: RobotSpec, config: IKConfig | None = None) -> IKSolver:
-    """Build the IK backend ``name`` ("mink" | "pinocchio") for robot ``spec``."""
+    """Build the IK backend ``name`` ("mink" | "pinocchio" | "casadi") for robot ``spec``."""
     return ik_backend(name)(spec, config)
 

@@ -9,8 +9,11 @@ byte buffer by ``safetensors``), and every problem is a :class:`CheckpointError`
 * not a safetensors file (``.pt``/``.pth``/``.ckpt``, pickle or zip payloads, even when renamed),
 * truncated or corrupt bytes, header offsets outside the file, unknown dtypes,
 * weights that do not match their metadata (hash), NaN/inf values, missing/unexpected keys, wrong shapes,
-* a checkpoint made for another robot, planner camera (name, K, pose) or image size than the run,
-  or for another planner kind (trajectory vs direct).
+* metadata that is not what was saved (``metadata_sha256``, a digest over every other metadata field,
+  so a relabelled robot or camera is refused), malformed metadata (wrong types, nesting, size),
+* a checkpoint made for another robot model (matched by :func:`tcot_hybrid.robot.robot_model_digest`,
+  not by name), joint count, planner camera (name, K, pose) or image size than the run, or for another
+  planner kind (trajectory vs direct).
 """
 from __future__ import annotations
 
@@ -25,7 +28,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from tcot_hybrid.errors import CheckpointError, ConfigError
+from tcot_hybrid.errors import CheckpointError, ConfigError, short_repr
 from tcot_hybrid.jsonio import json_default as _json_default
 
 FORMAT = "tcot-planner-v1"
@@ -33,8 +36,9 @@ SUFFIX = ".safetensors"
 MAX_HEADER_BYTES = 16 * 1024 * 1024
 MAX_FILE_BYTES = 512 * 1024 * 1024
 _ALLOWED_DTYPES = {"F32": 4, "F16": 2, "BF16": 2, "I64": 8}
-REQUIRED_META = ("format", "kind", "model", "robot", "camera", "vocabulary", "windows", "weights_sha256",
-                 "data_hash", "metrics", "versions")
+REQUIRED_META = ("format", "kind", "model", "robot", "robot_model_digest", "camera", "vocabulary", "windows",
+                 "weights_sha256", "data_hash", "metrics", "versions", "metadata_sha256")
+MAX_META_BYTES = 4 * 1024 * 1024  # the shipped metadata is ~5 kB
 # What pickle / torch.save / numpy archives start with: refused with a message saying so.
 _PICKLE_MAGIC = (b"\x80\x02", b"\x80\x03", b"\x80\x04", b"\x80\x05")
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -62,6 +66,19 @@ def camera_meta(camera) -> dict:
     """Planner camera fields stored in (and checked against) a checkpoint."""
     return {"name": camera.name, "width": int(camera.width), "height": int(camera.height),
             "K": np.asarray(camera.K).tolist(), "T_world_cam": np.asarray(camera.T_world_cam).tolist()}
+
+
+def metadata_digest(meta: dict) -> str:
+    """SHA-256 over every metadata field but ``metadata_sha256`` itself (canonical JSON, sorted keys)."""
+    body = {k: v for k, v in meta.items() if k != "metadata_sha256"}
+    return sha256_bytes(json.dumps(body, sort_keys=True, separators=(",", ":"), default=_json_default).encode())
+
+
+def stamp_metadata(meta: dict) -> dict:
+    """``meta`` as JSON will store it (numpy values converted), with its ``metadata_sha256`` (re)computed."""
+    plain = json.loads(json.dumps({k: v for k, v in meta.items() if k != "metadata_sha256"}, default=_json_default))
+    plain["metadata_sha256"] = metadata_digest(plain)
+    return plain
 
 
 def versions() -> dict:
@@ -94,14 +111,19 @@ def save_checkpoint(path: str | Path, model, meta: dict) -> Path:
     full = dict(meta)
     full.update(format=FORMAT, kind=model.cfg.kind, model=dataclasses.asdict(model.cfg),
                 weights_sha256=sha256_bytes(blob))
+    if "robot_model_digest" not in full and isinstance(full.get("robot"), str):
+        from tcot_hybrid.robot import load_robot_spec, robot_model_digest
+
+        full["robot_model_digest"] = robot_model_digest(load_robot_spec(full["robot"]))
+    full = stamp_metadata(full)
     missing = [k for k in REQUIRED_META if k not in full]
     if missing:
         raise CheckpointError(f"checkpoint metadata lacks {missing}")
+    from tcot_hybrid.jsonio import atomic_write_bytes, atomic_write_text
+
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_suffix(".tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(p)
-    meta_path(p).write_text(json.dumps(full, indent=1, default=_json_default) + "\n")
+    atomic_write_bytes(p, blob)  # each file is replaced whole; weights and metadata are tied by weights_sha256
+    atomic_write_text(meta_path(p), json.dumps(full, indent=1, default=_json_default) + "\n")
     return p
 
 
@@ -185,28 +207,105 @@ def _read_weights(path: Path) -> tuple[bytes, dict]:
 
 def _read_meta(path: Path) -> dict:
     mp = meta_path(path)
+    where = f"checkpoint metadata {str(mp)!r}"
     if not mp.is_file():
         raise CheckpointError(f"checkpoint {str(path)!r} has no metadata file {str(mp)!r} next to it")
+    size = mp.stat().st_size
+    if size > MAX_META_BYTES:
+        raise CheckpointError(f"{where} is {size} bytes; refusing metadata over {MAX_META_BYTES} bytes")
     try:
         meta = json.loads(mp.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CheckpointError(f"checkpoint metadata {str(mp)!r} is not valid JSON ({exc})") from exc
+        raise CheckpointError(f"{where} is not valid JSON ({exc})") from exc
+    except RecursionError as exc:
+        raise CheckpointError(f"{where} is nested too deep to be checkpoint metadata") from exc
     if not isinstance(meta, dict):
-        raise CheckpointError(f"checkpoint metadata {str(mp)!r} is not a JSON object")
+        raise CheckpointError(f"{where} is not a JSON object")
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
-        raise CheckpointError(f"checkpoint metadata {str(mp)!r} lacks {missing}")
+        hint = (" (saved before metadata was hashed: re-save it with save_checkpoint)"
+                if missing in (["metadata_sha256"], ["robot_model_digest", "metadata_sha256"]) else "")
+        raise CheckpointError(f"{where} lacks {missing}{hint}")
     if meta["format"] != FORMAT:
-        raise CheckpointError(f"checkpoint metadata {str(mp)!r} has format {meta['format']!r}, expected {FORMAT!r}")
+        raise CheckpointError(f"{where} has format {short_repr(meta['format'])}, expected {FORMAT!r}")
+    try:
+        digest = metadata_digest(meta)
+    except (RecursionError, ValueError, TypeError) as exc:
+        raise CheckpointError(f"{where} cannot be hashed ({type(exc).__name__}); corrupt") from exc
+    if meta["metadata_sha256"] != digest:
+        raise CheckpointError(f"{where} does not match its metadata_sha256: the metadata was edited after saving "
+                              f"(e.g. relabelled for another robot or camera) or is corrupt; refused")
+    _check_meta_types(meta, where)
     return meta
 
 
+def _check_meta_types(meta: dict, where: str) -> None:
+    """Every field the loader and the planners read has the type they expect (a CheckpointError, never an
+    AttributeError/ValueError deep inside a planner)."""
+    def bad(key: str, want: str) -> CheckpointError:
+        return CheckpointError(f"{where}: {key} must be {want}, got {short_repr(meta.get(key))}")
+
+    def number(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    for key in ("kind", "robot", "robot_model_digest", "weights_sha256", "data_hash"):
+        if not isinstance(meta[key], str) or not meta[key]:
+            raise bad(key, "a non-empty string")
+    for key in ("model", "camera", "metrics", "versions"):
+        if not isinstance(meta[key], dict):
+            raise bad(key, "a JSON object")
+    if meta["kind"] not in ("trajectory", "direct"):
+        raise bad("kind", "'trajectory' or 'direct'")
+    vocab = meta["vocabulary"]
+    if not isinstance(vocab, list) or not all(isinstance(w, str) and w for w in vocab) or len(set(vocab)) != len(vocab):
+        raise bad("vocabulary", "a list of distinct non-empty words")
+    cam = meta["camera"]
+    if not isinstance(cam.get("name"), str):
+        raise CheckpointError(f"{where}: camera.name must be a string, got {short_repr(cam.get('name'))}")
+    for key in ("width", "height"):
+        if not isinstance(cam.get(key), int) or isinstance(cam.get(key), bool) or cam[key] < 1:
+            raise CheckpointError(f"{where}: camera.{key} must be a positive integer, got {short_repr(cam.get(key))}")
+    for key, shape in (("K", (3, 3)), ("T_world_cam", (4, 4))):
+        v = cam.get(key)
+        if (not isinstance(v, list) or len(v) != shape[0]
+                or not all(isinstance(r, list) and len(r) == shape[1] and all(number(x) for x in r) for r in v)):
+            raise CheckpointError(f"{where}: camera.{key} must be a {shape[0]}x{shape[1]} list of numbers, "
+                                  f"got {short_repr(v)}")
+    w = meta["windows"]
+    if meta["kind"] == "trajectory" or w is not None:
+        if not isinstance(w, dict):
+            raise bad("windows", "a JSON object")
+        for k, v in w.items():
+            if k == "global_spacing":
+                if v not in ("time", "events"):
+                    raise CheckpointError(f"{where}: windows.global_spacing must be 'time' or 'events', got "
+                                          f"{short_repr(v)}")
+            elif not isinstance(v, int) or isinstance(v, bool):
+                raise CheckpointError(f"{where}: windows.{k} must be an integer, got {short_repr(v)}")
+    if "max_unknown_fraction" in meta and not (number(meta["max_unknown_fraction"])
+                                               and 0 <= meta["max_unknown_fraction"] <= 1):
+        raise bad("max_unknown_fraction", "a number in [0, 1]")
+
+
 def check_compatible(meta: dict, *, robot: str | None = None, camera=None, kind: str | None = None,
-                     where: str = "checkpoint") -> None:
-    """Refuse a checkpoint made for another robot, planner camera, image size or planner kind."""
+                     where: str = "checkpoint", robot_spec=None) -> None:
+    """Refuse a checkpoint made for another robot, planner camera, image size or planner kind.
+
+    With ``robot_spec`` the robot is matched by its model digest (:func:`robot_model_digest`), not its name:
+    a different arm under the same name is refused, the same model under another name accepted."""
     if kind is not None and meta.get("kind") != kind:
         raise CheckpointError(f"{where} is a {meta.get('kind')!r} planner checkpoint; this planner needs {kind!r}")
-    if robot is not None and meta.get("robot") != robot:
+    if robot_spec is not None:
+        from tcot_hybrid.robot import robot_model_digest
+
+        have = robot_model_digest(robot_spec)
+        if meta.get("robot_model_digest") != have:
+            raise CheckpointError(
+                f"{where} was trained for robot {short_repr(meta.get('robot'))} with model digest "
+                f"{short_repr(meta.get('robot_model_digest'))}, but this run's robot {robot_spec.name!r} "
+                f"({robot_spec.mjcf_path}) has model digest {have}: another arm (or an edited one), whatever its "
+                f"name; train a checkpoint for it")
+    elif robot is not None and meta.get("robot") != robot:
         raise CheckpointError(f"{where} was trained for robot {meta.get('robot')!r}, but this run uses {robot!r}")
     if camera is not None:
         cm = meta.get("camera")
@@ -230,8 +329,13 @@ def check_compatible(meta: dict, *, robot: str | None = None, camera=None, kind:
                                       f"(max difference {diff:.3g}); the camera must match the training data's")
 
 
-def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, kind: str | None = None) -> Checkpoint:
-    """Validate and load a checkpoint; ``robot``/``camera``/``kind`` (when given) must match its metadata."""
+def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, kind: str | None = None,
+                    robot_spec=None) -> Checkpoint:
+    """Validate and load a checkpoint; ``robot``/``camera``/``kind`` (when given) must match its metadata.
+
+    ``robot_spec`` (the run's RobotSpec) matches the robot by model digest and its joint count against the
+    network's; with ``camera`` the image size must equal the network's input size too. Every mismatch is
+    refused here, before a simulation step."""
     import torch
     from safetensors import SafetensorError
     from safetensors.torch import load as st_load
@@ -246,13 +350,32 @@ def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, 
     if sha256_bytes(blob) != meta["weights_sha256"]:
         raise CheckpointError(f"{where}: weights do not match the SHA-256 recorded in {meta_path(p).name} "
                               f"(modified or mixed-up files)")
-    check_compatible(meta, robot=robot, camera=camera, kind=kind, where=where)
+    check_compatible(meta, robot=robot, camera=camera, kind=kind, where=where, robot_spec=robot_spec)
     try:
         cfg = from_mapping(ModelConfig, meta["model"], prefix="model")
     except ConfigError as exc:
         raise CheckpointError(f"{where}: invalid model config in metadata: {exc}") from exc
+    except (TypeError, ValueError, AttributeError, RecursionError) as exc:
+        raise CheckpointError(f"{where}: invalid model config in metadata ({type(exc).__name__})") from exc
     if cfg.kind != meta["kind"]:
         raise CheckpointError(f"{where}: metadata kind {meta['kind']!r} disagrees with model.kind {cfg.kind!r}")
+    if robot_spec is not None and cfg.dof != robot_spec.dof:
+        raise CheckpointError(f"{where}: the network takes {cfg.dof} joints, robot {robot_spec.name!r} has "
+                              f"{robot_spec.dof}")
+    cam = meta["camera"]
+    if (cam["width"], cam["height"]) != (cfg.image_px, cfg.image_px):
+        raise CheckpointError(f"{where}: metadata camera is {cam['width']}x{cam['height']} px but the network "
+                              f"takes {cfg.image_px}x{cfg.image_px} px images")
+    if cfg.kind == "trajectory":
+        from tcot_hybrid.data.labels import windows_from_meta
+
+        try:
+            win = windows_from_meta(meta["windows"])
+        except (ConfigError, TypeError) as exc:
+            raise CheckpointError(f"{where}: invalid label windows in metadata: {exc}") from exc
+        if win.L_g != cfg.n_global or win.L_l + 1 != cfg.n_local:
+            raise CheckpointError(f"{where}: windows {short_repr(meta['windows'])} do not match the network "
+                                  f"({cfg.n_global} global, {cfg.n_local} local waypoints)")
     vocab = meta["vocabulary"]
     if not isinstance(vocab, list) or len(vocab) != cfg.vocab_size:
         raise CheckpointError(f"{where}: vocabulary has {len(vocab) if isinstance(vocab, list) else '?'} words, "
@@ -288,7 +411,7 @@ def checkpoints_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "checkpoints"
 
 
-def default_checkpoint(robot: str, kind: str = "trajectory") -> Path:
+def default_checkpoint(robot: str, kind: str = "trajectory", *, robot_ref: str | None = None) -> Path:
     """The shipped checkpoint for ``robot`` (``<robot>_default`` / ``<robot>_direct_default``)."""
     stem = f"{robot}_default" if kind == "trajectory" else f"{robot}_{kind}_default"
     p = checkpoints_dir() / f"{stem}{SUFFIX}"
@@ -296,7 +419,7 @@ def default_checkpoint(robot: str, kind: str = "trajectory") -> Path:
         have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}")) if checkpoints_dir().is_dir() else []
         raise CheckpointError(
             f"no shipped {kind} planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
-            f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot} --data "
+            f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot_ref or robot} --data "
             f"data/demos_{robot}.hdf5 --out runs/{robot}.safetensors{'' if kind == 'trajectory' else ' --kind ' + kind}` "
             f"and pass --checkpoint runs/{robot}.safetensors")
     return p

@@ -137,6 +137,7 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         arr = f.read(name, _KEYS)
         T = info.num_samples
         rows, traj = keep(info, T)
+        rows = rows & f.image_valid(name)  # a sample collected without an image is never a training frame
         track = track_from_arrays(arr)
         gl, ll = global_labels(track, windows), local_labels(track, windows)
         pos = arr["obs/robot0_eef_pos"].astype(np.float32)

@@ -1,4 +1,4 @@
-"""Held-out evaluation of a planner checkpoint on demonstrations it never saw (validation split by seed,
+"""Offline evaluation of a planner checkpoint on demonstrations: held-out ones (validation split by seed,
 or a file collected on seeds >= 1000): waypoint pixel error, lifted 3D error, gripper-bit accuracy,
 success-detection AUROC, per task; plus how much unseen paraphrases of the instructions cost.
 
@@ -180,9 +180,21 @@ def evaluate_direct(ck, frames, idx=None) -> dict:
     return direct_metrics(ck.model, frames, idx)
 
 
+def demo_label(meta: dict, data: str | Path, split: str) -> str:
+    """What the evaluated demos are to the checkpoint: "held-out" only when it never trained on them (the
+    validation split of a file it trained on, or any split of a file it never saw)."""
+    from tcot_hybrid.learning.data import file_hash
+
+    trained_on = file_hash(data) in str(meta.get("data_hash", "")).split("+")
+    if not trained_on or split == "valid":
+        return "held-out demos"
+    return "training demos" if split == "train" else "demos (training and validation splits)"
+
+
 def markdown(r: dict) -> str:
+    label = r.get("demos_label", "held-out demos")
     lines = [f"Checkpoint `{r['checkpoint']}` on `{r['data']}` split `{r['split']}` "
-             f"({r['result']['demos']} held-out demos, {r['result']['frames']} frames); command: `{r['command']}`", ""]
+             f"({r['result']['demos']} {label}, {r['result']['frames']} frames); command: `{r['command']}`", ""]
     res = r["result"]
     if r["kind"] == "direct":
         lines += ["| metric | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in res.items()]
@@ -236,7 +248,7 @@ def run(checkpoint: str | Path, data: str | Path, *, split: str = "valid", out: 
     frames = load_frames(data, split, vocab, windows=windows_from_meta(ck.meta["windows"]),
                          max_tokens=ck.model.cfg.max_tokens, direct_horizon=int(ck.meta.get("direct_horizon", 3)))
     report: dict = {"checkpoint": str(checkpoint), "data": str(data), "split": split, "kind": ck.meta["kind"],
-                    "command": command}
+                    "demos_label": demo_label(ck.meta, data, split), "command": command}
     if ck.meta["kind"] == "direct":
         report["result"] = {"demos": len(frames.demos), **evaluate_direct(ck, frames)}
     else:

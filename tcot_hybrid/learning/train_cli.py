@@ -35,6 +35,22 @@ class TrainCommand:
     """Demonstrations per task to collect (only with --collect); seeds 0 .. N-1."""
     workers: int = 2
     """Collection worker processes (only with --collect)."""
+    overwrite: bool = False
+    """Replace an existing checkpoint at --out (refused without this flag)."""
+
+
+def check_train_out(out: str | Path, *, overwrite: bool) -> None:
+    """Before any training: refuse to replace an existing checkpoint unless asked, and make sure the
+    checkpoint's folder can be written (read-only, a file where the folder belongs, disk full)."""
+    from tcot_hybrid.errors import OutputError
+    from tcot_hybrid.jsonio import check_output_file
+
+    p = Path(out)
+    existing = [x for x in (p, p.with_suffix(".json")) if x.exists() or x.is_symlink()]
+    if existing and not overwrite:
+        raise OutputError(f"--out {str(p)!r}: {', '.join(repr(str(x)) for x in existing)} already exist(s) (a trained "
+                          f"checkpoint?); pass --overwrite to replace it, or choose another --out")
+    check_output_file(p, what="--out")
 
 
 def cmd_train(argv: list[str]) -> int:
@@ -44,6 +60,7 @@ def cmd_train(argv: list[str]) -> int:
     base = load_train_config(known.config) if known.config else TrainConfig()
     cmd = tyro.cli(TrainCommand, args=argv, default=TrainCommand(cfg=base, config=known.config), prog="tcot train")
     t0 = time.perf_counter()
+    check_train_out(cmd.cfg.out, overwrite=cmd.overwrite)
     data = Path(cmd.cfg.data)
     if cmd.collect and data.exists():
         from tcot_hybrid.learning.data import env_of

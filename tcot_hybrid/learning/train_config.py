@@ -180,28 +180,13 @@ class TrainConfig:
 
 
 def load_train_config(path: str | Path) -> TrainConfig:
-    """TrainConfig from YAML/TOML/JSON (unknown keys and wrong types name the field)."""
-    import tomllib
-
-    import yaml
-
+    """TrainConfig from YAML/TOML/JSON (unknown keys and wrong types name the field; size, alias expansion,
+    nesting and duplicate keys bounded as for run configs)."""
     from tcot_hybrid.config import from_mapping
+    from tcot_hybrid.run_config import read_config_file
 
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"train config {str(p)!r} does not exist")
-    text = p.read_text()
-    try:
-        if p.suffix in (".yaml", ".yml"):
-            data = yaml.safe_load(text)
-        elif p.suffix == ".toml":
-            data = tomllib.loads(text)
-        elif p.suffix == ".json":
-            data = json.loads(text)
-        else:
-            raise ConfigError(f"train config {str(p)!r}: unknown format {p.suffix!r}; use .yaml, .toml or .json")
-    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"train config {str(p)!r} is malformed: {exc}") from exc
+    data = read_config_file(p, what="train config")
     try:
         return from_mapping(TrainConfig, data or {})
     except ConfigError as exc:

@@ -32,6 +32,7 @@ TIME_LIMIT_S = {"libero_spatial": 30.0, "libero_object": 30.0, "libero_goal": 30
 DEFAULT_TIME_LIMIT_S = 60.0
 # The cameras robosuite 1.4 puts in every LIBERO scene (agentview is the paper's planner camera).
 CAMERAS = ("agentview", "frontview", "birdview", "sideview", "galleryview", "robot0_robotview", "robot0_eye_in_hand")
+RELOCATION_MARGIN_M = 0.05  # [m] object_moved / target_moved land within the objects' box grown by this
 SETTLE_S = 1.0  # [s] LIBERO's init states hold objects a few mm above their supports: let them land
 
 
@@ -152,6 +153,12 @@ class LiberoTask(Task):
 
     def cameras(self) -> tuple[str, ...]:
         return CAMERAS
+
+    def relocation_zone(self, world, name):
+        """Where the scene's movable objects are: their bounding box (xy) grown by RELOCATION_MARGIN_M."""
+        xy = np.array([world.pos(n)[:2] for n in world.objects])
+        lo, hi = xy.min(axis=0) - RELOCATION_MARGIN_M, xy.max(axis=0) + RELOCATION_MARGIN_M
+        return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
     def release_scene(self) -> None:
         if self.scene is not None:

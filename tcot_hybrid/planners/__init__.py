@@ -24,12 +24,15 @@ class ObservationContext:
     camera:     the planner camera's model (intrinsics, pose, image size): the calibration a real robot has.
     robot_name: the robot (checkpoint compatibility, its own kinematic model).
     options:    planner settings (``RunConfig.oracle`` / ``learned``, the checkpoint path).
+    robot:      the run's RobotSpec (its model, as a real robot knows its own): checkpoints are matched to it
+                by model digest, not by name. None when unknown (then the name is compared).
     At every step the planner then gets an :class:`Observation` (image, proprioception, instruction).
     """
 
     camera: CameraModel
     robot_name: str
     options: dict[str, Any]
+    robot: Any = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,9 +47,11 @@ class PlannerContext:
     camera: CameraModel
     robot_name: str
     options: dict[str, Any]
+    robot: Any = None  # the run's RobotSpec: checkpoints are matched to it by model digest, not by name
 
     def observation_only(self) -> ObservationContext:
-        return ObservationContext(camera=self.camera, robot_name=self.robot_name, options=dict(self.options))
+        return ObservationContext(camera=self.camera, robot_name=self.robot_name, options=dict(self.options),
+                                  robot=self.robot)
 
 
 _FACTORIES: dict[str, Callable[[Any], Planner]] = {}
@@ -84,15 +89,17 @@ def check_planner_name(name: str) -> None:
 CHECKPOINT_KINDS = {"learned": "trajectory", "direct": "direct"}
 
 
-def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None) -> Path | None:
+def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None, *,
+                       robot_ref: str | None = None) -> Path | None:
     """The checkpoint file planner ``name`` loads: ``checkpoint`` if given, else the robot's shipped default
-    (``CheckpointError`` naming the shipped ones if there is none); None for planners without a network."""
+    (``CheckpointError`` naming the shipped ones if there is none); None for planners without a network.
+    ``robot_ref`` is how the user names the robot (a path for one of their own), for the error's advice."""
     kind = CHECKPOINT_KINDS.get(name)
     if kind is None:
         return None
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 
-    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind)
+    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind, robot_ref=robot_ref)
 
 
 def make_planner(name: str, ctx: PlannerContext | ObservationContext) -> Planner:

@@ -273,8 +273,11 @@ class LearnedPlanner(NetworkPlanner):
         from tcot_hybrid.learning.checkpoint import load_checkpoint
         from tcot_hybrid.planners import planner_checkpoint
 
-        path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"))
-        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind)
+        from tcot_hybrid.robot import robot_ref
+
+        path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"),
+                                  robot_ref=robot_ref(ctx.robot) if ctx.robot is not None else None)
+        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot)
         return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
 
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:

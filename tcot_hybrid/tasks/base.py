@@ -298,6 +298,12 @@ class Task(ABC):
 
         return build_workcell_scene(robot, self.add_objects, config=scene, sim_dt=timing.sim_dt)
 
+    def relocation_zone(self, world: "World", name: str) -> tuple[float, float, float, float] | None:
+        """(xmin, xmax, ymin, ymax) [m, world] where a perturbation may move object ``name``; None = nowhere."""
+        from tcot_hybrid.perturbations import FAR_ZONE, WORKSPACE
+
+        return WORKSPACE if world.pos(name)[0] <= WORKSPACE[1] else FAR_ZONE
+
     def cameras(self) -> tuple[str, ...]:
         """Camera names the task's scene has (checked before anything is built)."""
         from tcot_hybrid.scene import CAMERAS

@@ -63,3 +63,17 @@ def test_bad_libero_names_and_init_states(tmp_path, capsys):
     with pytest.raises(ConfigError, match="no usable shipped init states"):
         task.set_episode(seed=0, init="shipped")
     task.set_episode(seed=0, init="sampled")  # a sampled layout needs no init states
+
+
+def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path, capsys):
+    pytest.importorskip("libero")
+    cfg = tmp_path / "shipped.yaml"
+    cfg.write_text("init: shipped\n")
+    out = str(tmp_path / "d.hdf5")
+    assert main(["collect", "--suite", "libero_goal", "--config", str(cfg), "--out", out]) == 2
+    assert "test set" in capsys.readouterr().err
+    assert main(["collect", "--tasks", "goal_cube_on_plate," + suite_task_names("libero_goal")[0], "--out", out]) == 2
+    assert "separate files" in capsys.readouterr().err
+    assert main(["collect", "--suite", "libero_goal", "--seed-start", "49990", "--episodes-per-task", "20",
+                 "--out", out]) == 2
+    assert "< 50000" in capsys.readouterr().err
