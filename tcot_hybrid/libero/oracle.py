@@ -18,8 +18,9 @@ import numpy as np
 # first plan's latency budget (SupervisorConfig.max_plan_latency_s): LiberoTask.build_scene imports this module.
 import scipy.spatial.transform  # noqa: F401
 
-from tcot_hybrid.errors import PlanningError
-from tcot_hybrid.libero.skills import Destination, LiberoSkill, MoveJoint, OracleContext, PickPlace
+from tcot_hybrid.errors import ConfigError, PlanningError
+from tcot_hybrid.libero.joints import MoveJoint
+from tcot_hybrid.libero.skills import Destination, LiberoSkill, OracleContext, PickPlace
 
 SUPPORTED_PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 JOINT_PREDICATES = {"open": "is_open", "close": "is_close", "turnon": "turn_on", "turnoff": "turn_off"}
@@ -57,7 +58,8 @@ def goal_predicates(task) -> list[list[str]]:
     goal = [list(map(str, g)) for g in task.scene.env.parsed_problem["goal_state"]]
     for g in goal:
         if not g or g[0].lower() not in SUPPORTED_PREDICATES:
-            raise PlanningError(f"LIBERO oracle: task {task.name!r} has goal predicate {g[0] if g else g!r} "
+            # a property of the task file, not a transient planning failure: refused outright (exit != 0)
+            raise ConfigError(f"LIBERO oracle: task {task.name!r} has goal predicate {g[0] if g else g!r} "
                                 f"({' '.join(g)}) with no skill; supported predicates: "
                                 f"{', '.join(SUPPORTED_PREDICATES)}")
     return goal
@@ -76,13 +78,13 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
         if p in ("on", "in"):
             obj, target = g[1], g[2]
             if obj not in env.objects_dict:
-                raise PlanningError(f"LIBERO oracle: {p}({obj}, {target}) moves {obj!r}, which is not a movable "
+                raise ConfigError(f"LIBERO oracle: {p}({obj}, {target}) moves {obj!r}, which is not a movable "
                                     f"object of this scene ({', '.join(env.objects_dict)})")
             is_site = target in env.object_sites_dict
             if not is_site and target not in env.objects_dict and target not in env.fixtures_dict:
-                raise PlanningError(f"LIBERO oracle: {p}({obj}, {target}): unknown destination {target!r}")
+                raise ConfigError(f"LIBERO oracle: {p}({obj}, {target}): unknown destination {target!r}")
             if not is_site and target in env.fixtures_dict:
-                raise PlanningError(f"LIBERO oracle: {p}({obj}, {target}): a fixture as destination needs a region")
+                raise ConfigError(f"LIBERO oracle: {p}({obj}, {target}): a fixture as destination needs a region")
             k = dest_seen.get(target, 0)
             dest_seen[target] = k + 1
             dest = Destination(relation=p, target=target, is_site=is_site, slot=k, slots=dest_count[target])
@@ -141,7 +143,7 @@ def joint_goal(ctx: OracleContext, name: str, predicate: str, joint: int) -> tup
     owner = _owner(ctx, name)
     fn = getattr(owner, JOINT_PREDICATES[predicate], None)
     if fn is None:
-        raise PlanningError(f"LIBERO oracle: {predicate}({name}): {type(owner).__name__} has no "
+        raise ConfigError(f"LIBERO oracle: {predicate}({name}): {type(owner).__name__} has no "
                             f"{JOINT_PREDICATES[predicate]}() to read the goal from")
     lo, hi = m.jnt_range[joint]
     qs = np.linspace(lo, hi, 400)
@@ -149,7 +151,7 @@ def joint_goal(ctx: OracleContext, name: str, predicate: str, joint: int) -> tup
     if predicate in ("close", "turnoff"):  # close/off: the predicate itself is the target
         pass
     if not ok.any():
-        raise PlanningError(f"LIBERO oracle: no value of joint {m.joint(joint).name!r} in [{lo}, {hi}] makes "
+        raise ConfigError(f"LIBERO oracle: no value of joint {m.joint(joint).name!r} in [{lo}, {hi}] makes "
                             f"{predicate}({name}) true")
     q_now = float(d.qpos[m.jnt_qposadr[joint]])
     idx = np.flatnonzero(ok)
@@ -173,7 +175,7 @@ def joint_skill(ctx: OracleContext, g: list[str]) -> MoveJoint:
     p, name = g[0].lower(), g[1]
     joints = _articulated_joints(ctx, name)
     if not joints:
-        raise PlanningError(f"LIBERO oracle: {p}({name}): {name!r} has no slide or hinge joint to move")
+        raise ConfigError(f"LIBERO oracle: {p}({name}): {name!r} has no slide or hinge joint to move")
     j = joints[0]
     goal, push = joint_goal(ctx, name, p, j)
     return MoveJoint(ctx, name, j, goal, push, g)

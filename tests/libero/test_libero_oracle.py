@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from tcot_hybrid.errors import PlanningError
+from tcot_hybrid.errors import ConfigError
 
 pytest.importorskip("libero")
 
@@ -37,7 +37,7 @@ def test_a_predicate_without_a_skill_is_refused_by_name():
     fake = SimpleNamespace(name="libero_x:lift_the_bowl",
                            scene=SimpleNamespace(env=SimpleNamespace(parsed_problem={
                                "goal_state": [["on", "bowl_1", "plate_1"], ["up", "bowl_1"]]})))
-    with pytest.raises(PlanningError) as err:
+    with pytest.raises(ConfigError) as err:
         goal_predicates(fake)
     msg = str(err.value)
     assert "'up'" in msg and "lift_the_bowl" in msg
