@@ -20,7 +20,8 @@ import scipy.spatial.transform  # noqa: F401
 
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.libero.joints import MoveJoint
-from tcot_hybrid.libero.skills import Destination, LiberoSkill, OracleContext, PickPlace
+from tcot_hybrid.libero.geometry import Boxes, subtree_bodies
+from tcot_hybrid.libero.skills import Destination, Effect, LiberoSkill, OracleContext, PickPlace
 
 SUPPORTED_PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 JOINT_PREDICATES = {"open": "is_open", "close": "is_close", "turnon": "turn_on", "turnoff": "turn_off"}
@@ -43,7 +44,11 @@ def ground_z(task) -> float:
 def goal_skills(task) -> list[LiberoSkill]:
     """The oracle script for the task's goal (cached per episode: ``task._oracle`` is reset by ``reset``)."""
     cached = getattr(task, "_oracle", None)
-    if cached is not None:
+    # A script composed before the robot acts (e.g. read by a perturbation or a check while the objects settle)
+    # saw unsettled objects (a bowl still above the table has no support to set it aside on): it is composed
+    # again while the hand is still at its start pose; once the hand has moved the script stays fixed.
+    if cached is not None and (float(cached.data.time) == cached.built_at
+                               or np.linalg.norm(cached.world.tcp_pos() - cached.home_tcp) > 0.01):
         return cached.skills
     world = task.world if hasattr(task, "world") else None
     if world is None:
@@ -106,7 +111,53 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
     # an Open goal whose region is also a destination must happen before the placement
     early_opens = [o for o in opens if any(d.dest.is_site and _joint_of(ctx, d.dest.target) == o.joint for d in places)]
     late_opens = [o for o in opens if o not in early_opens]
-    return switches + opens_needed + early_opens + places + late_opens + closes
+    # an object the opening drawer would shove (a bowl standing in front of it) is set aside first
+    asides = []
+    for step in opens_needed + early_opens:
+        for place in places:
+            spot = _aside_spot(ctx, place.obj, step) if _in_the_way(ctx, place.obj, step) else None
+            if spot is not None and all(a.obj != place.obj for a in asides):
+                asides.append(PickPlace(ctx, place.obj, Destination(relation="aside", target=None, is_site=False,
+                                                                    point=spot), ["aside", place.obj]))
+    return switches + asides + opens_needed + early_opens + places + late_opens + closes
+
+
+def _in_the_way(ctx: OracleContext, obj: str, step: MoveJoint) -> bool:
+    """Whether ``step``'s moving part, at its goal, overlaps ``obj`` or the 25 cm above it (an open drawer over a
+    bowl leaves no room for the hand to pick it), 2 cm margin."""
+    part = ctx.boxes(subtree_bodies(ctx.model, int(ctx.model.jnt_bodyid[step.joint])),
+                     [Effect(joint=step.joint, q=step.q_push)])
+    lo, hi = ctx.object_boxes(obj, []).aabb()
+    column = Boxes(((lo + hi) / 2 + np.array([0, 0, 0.125]))[None], np.eye(3)[None],
+                   ((hi - lo) / 2 + np.array([0, 0, 0.125]))[None], np.zeros(1, int))
+    return PickPlace._boxes_hit(column, part, margin=0.02) or PickPlace._boxes_hit(part, column, margin=0.02)
+
+
+def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint) -> np.ndarray | None:
+    """A free spot for ``obj`` on its own support, clear of ``step``'s part at its goal and of everything else,
+    in the planner camera's view: the nearest of rings 10-25 cm around it."""
+    boxes = ctx.object_boxes(obj, [])
+    origin = ctx.world.pos(obj)
+    lo, hi = boxes.aabb()
+    obstacles = ctx.obstacles([Effect(joint=step.joint, q=step.q_push)], exclude=(obj,))
+    ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+    tops = obstacles.centre[:, 2] + ext[:, 2]
+    for radius in (0.10, 0.15, 0.20, 0.25):
+        for ang in np.deg2rad(np.arange(0, 360, 30)):
+            d = radius * np.array([np.cos(ang), np.sin(ang), 0.0])
+            moved = Boxes(boxes.centre + d + np.array([0, 0, 0.015]), boxes.rot, boxes.half, boxes.geom)
+            if PickPlace._boxes_hit(moved, obstacles, margin=0.012):  # (lifted off its support for the test)
+                continue
+            # the same support: whatever is under the new footprint tops out where the old support did
+            under = obstacles.select((np.abs(obstacles.centre[:, 0] - (origin[0] + d[0])) <= ext[:, 0])
+                                     & (np.abs(obstacles.centre[:, 1] - (origin[1] + d[1])) <= ext[:, 1])
+                                     & (tops <= lo[2] + 0.01))
+            if len(under) == 0 or abs(under.aabb()[1][2] - lo[2]) > 0.01:
+                continue
+            spot = origin + d
+            if ctx.in_view(spot) and ctx.in_view(spot + np.array([0, 0, hi[2] - lo[2] + 0.05])):
+                return spot
+    return None
 
 
 def _articulated_joints(ctx: OracleContext, name: str) -> list[int]:

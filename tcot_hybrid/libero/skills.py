@@ -77,6 +77,7 @@ class OracleContext:
         self.base_pos = self.data.xpos[base].copy() if base >= 0 else self.home_tcp.copy()
         self.home_rot = world.tcp_rot()
         self.skills: list["LiberoSkill"] = []
+        self.built_at = float(self.data.time)  # [s] simulation time the script was composed at
         self.camera = getattr(task, "planner_camera", None) or "agentview"
         self.image_px = int(getattr(task, "planner_image_px", None) or 128)
         self._camera_model = None
@@ -233,11 +234,12 @@ class LiberoSkill(Skill):
 class Destination:
     """Where a pick-and-place puts its object: on another object, on a region site, or in a region site."""
 
-    relation: str  # "on" | "in"
-    target: str  # object name or region site name
+    relation: str  # "on" | "in" | "aside"
+    target: str | None  # object name or region site name (None: a free spot, ``point``)
     is_site: bool
     slot: int = 0  # several objects to one destination: slot k of n (spread apart)
     slots: int = 1
+    point: np.ndarray | None = None  # "aside": a free spot on the object's own support [m, world]
 
 
 class PickPlace(LiberoSkill):
@@ -250,6 +252,9 @@ class PickPlace(LiberoSkill):
         self._place: np.ndarray | None = None
 
     def done(self, world: World) -> bool:
+        if self.dest.point is not None:  # set aside: within 3 cm of the spot, released
+            return bool(np.linalg.norm(world.pos(self.obj)[:2] - self.dest.point[:2]) < 0.03
+                        and not world.is_held(self.obj))
         return super().done(world) and not world.is_held(self.obj)
 
     def effect(self, world: World) -> Effect | None:
@@ -375,11 +380,11 @@ class PickPlace(LiberoSkill):
         return out
 
     @staticmethod
-    def _boxes_hit(body: Boxes, obstacles: Boxes) -> bool:
+    def _boxes_hit(body: Boxes, obstacles: Boxes, margin: float = 0.002) -> bool:
         """Conservative box-vs-box test: each carried box's corners and centre against the obstacles."""
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)] + [[0, 0, 0]], float)
         pts = body.centre[:, None, :] + np.einsum("nij,nkj->nki", body.rot, signs[None] * body.half[:, None, :])
-        return bool(obstacles.contains(pts.reshape(-1, 3), margin=0.002).any())
+        return bool(obstacles.contains(pts.reshape(-1, 3), margin=margin).any())
 
     def _support_z(self, obstacles: Boxes, lo, hi) -> float:
         """Top of the highest obstacle box under the footprint [lo, hi] (xy) whose top is below the
@@ -395,6 +400,8 @@ class PickPlace(LiberoSkill):
 
     def _reference_top(self) -> float:
         ctx, d = self.ctx, self.dest
+        if d.point is not None:
+            return float(d.point[2] + 0.005)
         if d.is_site:
             sid = ctx.model.site(d.target).id
             effects = ctx.effects_before(self, ctx.world)
@@ -409,6 +416,8 @@ class PickPlace(LiberoSkill):
     def _region(self, world, effects):
         """Destination frame: centre (3,), rotation, xy half size, and whether it is a region site."""
         ctx, d = self.ctx, self.dest
+        if d.point is not None:
+            return np.asarray(d.point, float), np.eye(3), np.array([0.005, 0.005])
         if d.is_site:
             sid = ctx.model.site(d.target).id
             bid = int(ctx.model.site_bodyid[sid])
