@@ -748,9 +748,10 @@ def test_robot_check_gripper_findings(tmp_path):
                        "  </actuator>"))
     checks = {c.name: c for c in gripper_checks(load_robot_spec(two))}
     assert not checks["finger actuators"].ok and "finger2_drive" in checks["finger actuators"].detail
-    lib = {c.name: c for c in gripper_checks(load_robot_spec("libero_panda"))}  # mirrored actuator, geometry-free MJCF
+    lib = {c.name: c for c in gripper_checks(load_robot_spec("libero_panda"))}  # mirrored actuator, pads in tip bodies
     assert lib["finger actuators"].ok
-    assert all(c.severity == "warning" for n, c in lib.items() if n.startswith("finger pads"))
+    pads = [c for n, c in lib.items() if n.startswith("finger pads")]
+    assert len(pads) == 2 and all(c.ok for c in pads)
 
 
 def test_compute_home_handles_continuous_joints(tmp_path):

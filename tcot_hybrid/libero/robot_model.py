@@ -3,7 +3,8 @@
 LIBERO's scenes mount robosuite's ``MountedPanda`` + ``PandaGripper``. This stack needs the same arm alone
 (for the robot spec, Pinocchio and mink), so ``robot_only_mjcf()`` takes robosuite's XML of exactly that
 robot, drops every geom and asset (kinematics, inertias, armature, damping and actuators are what the
-controllers and solvers use; the scene keeps the meshes) and adds two things robosuite's XML lacks:
+controllers and solvers use; the scene keeps the meshes; the finger pads' collision boxes stay, so the arm
+can also grasp in this project's workcell) and adds two things robosuite's XML lacks:
 
 - ``<compiler angle="radian"/>``: robosuite writes ranges in radians but relies on its world XML for the
   compiler flag; without it MuJoCo and Pinocchio read the ranges as degrees;
@@ -44,10 +45,13 @@ def robosuite_robot_xml() -> str:
 
 
 def _strip(root: ET.Element) -> None:
-    """Drop geoms, assets and contact exclusions; keep bodies, joints, inertials, sites, actuators."""
+    """Drop mesh geoms (they name robosuite's mesh files), assets, cameras and lights; keep bodies, joints,
+    inertials, sites, actuators and the primitive geoms (the finger pads' collision boxes, so the arm can grasp
+    when it is used outside LIBERO's scenes)."""
     for parent in list(root.iter()):
         for child in list(parent):
-            if child.tag in ("geom", "asset", "contact", "camera", "light"):
+            if child.tag in ("asset", "contact", "camera", "light") or (
+                    child.tag == "geom" and (child.get("type") == "mesh" or child.get("mesh") is not None)):
                 parent.remove(child)
     compiler = root.find("compiler")
     if compiler is None:
