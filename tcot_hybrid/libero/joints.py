@@ -15,6 +15,7 @@ from tcot_hybrid.tasks.base import Keyframe, World
 
 PAD_CENTRE_M = 0.004  # [m] the finger pads' centre is this far behind the TCP along the approach axis
 KNOB_EXTRA_RAD = 0.5  # [rad] a knob push goes this much past its goal (contact slips as the bar turns)
+KNOB_YAW_BACK_RAD = np.deg2rad(30.0)  # [rad] see MoveJoint._knob
 
 
 class MoveJoint(LiberoSkill):
@@ -147,7 +148,11 @@ class MoveJoint(LiberoSkill):
         turn = turn + np.sign(turn) * KNOB_EXTRA_RAD  # the bar slides along the fingers as it turns
         z = float(tops.max()) - 0.018
         start_xy = anchor[:2] + u * radius - tangent * (bar_half + 0.011 + 0.012)
-        rot = top_down(u)  # closing axis radial: the closed fingers' flat side pushes along the tangent
+        # closing axis about radial (the closed fingers' flat side pushes along the tangent), turned 30 degrees
+        # towards the home yaw: at -90 degrees joint 7 ended the push at 2.85 of its 2.9 rad and stalled
+        rot = top_down(u)
+        yaw = np.arctan2(rot[0, 1], -rot[1, 1])
+        rot = rot_z(-np.sign(yaw) * KNOB_YAW_BACK_RAD) @ rot
         p0 = np.array([start_xy[0], start_xy[1], z])
         # open above, close there: the planner resumes a plan from the point nearest the hand before its first
         # gripper switch, and a plan that starts closed has its first switch far down the script
