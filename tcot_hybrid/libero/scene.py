@@ -62,8 +62,21 @@ def _env_class(problem_name: str):
 
         ET.SubElement(link7, "site", name=TCP_SITE, pos=pos, quat=quat, size="0.005", rgba="0 0 0 0", group="5")
 
+    def _reset_internal(self):
+        # LIBERO places an object that sits on a fixture (a bowl on the stove, on the cabinet) at the
+        # fixture's new position *plus* the fixture site's current world position, which is right only on a
+        # freshly compiled model (fixtures at their XML pose: robosuite's hard reset). With hard_reset off
+        # the fixtures keep the previous layout's pose and such objects land in mid-air or off the table,
+        # so every body is put back to its compiled pose before LIBERO samples.
+        m = self.sim.model._model
+        if getattr(self, "_tcot_body_pose0", None) is None:
+            self._tcot_body_pose0 = (m.body_pos.copy(), m.body_quat.copy())
+        m.body_pos[:], m.body_quat[:] = self._tcot_body_pose0
+        base._reset_internal(self)
+
     # LIBERO asserts the class name equals the task file's problem name: keep it.
-    return type(base.__name__, (base,), {"_load_model": _load_model, "__module__": __name__})
+    return type(base.__name__, (base,), {"_load_model": _load_model, "_reset_internal": _reset_internal,
+                                         "__module__": __name__})
 
 
 # Built scenes not in use, by (task file, sim_dt): an evaluation worker runs many episodes of one task, and

@@ -141,6 +141,9 @@ class LiberoTask(Task):
         px = max(scene.planner_image_px, scene.video_width, scene.video_height)
         self.scene = LiberoScene.acquire(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
         check_camera(self.scene.model, scene.planner_camera)
+        import tcot_hybrid.libero.oracle  # noqa: F401  (its imports stay out of the first plan's time budget)
+        # the oracle keeps every waypoint inside the planner camera's image (plans live in its pixels)
+        self.planner_camera, self.planner_image_px = scene.planner_camera, scene.planner_image_px
         objects = libero_objects(self.scene)
         return BuiltScene(model=self.scene.model, data=self.scene.data, objects=objects,
                           support_z=self.scene.support_z(), render_option=render_option(),
@@ -183,7 +186,16 @@ class LiberoTask(Task):
             self.scene.set_state(states[self.episode_seed % len(states)])
         else:
             self.scene.sample_layout(self.episode_seed)
+        self.world = world  # the oracle's skills read it (privileged); rebuilt per episode
         self._oracle = None
+
+    @property
+    def travel_z(self) -> float:
+        """[m, world] height the oracle planner lifts an open hand to after a release: 25 cm above the lowest
+        resting surface (LIBERO's tables are not at z = 0, and the living room's has no table_top site)."""
+        from tcot_hybrid.libero.oracle import TRAVEL_ABOVE_GROUND_M, ground_z
+
+        return ground_z(self) + TRAVEL_ABOVE_GROUND_M
 
     def success(self, world: World) -> bool:
         return self.scene.goal_reached()

@@ -1,0 +1,201 @@
+"""Grasp and gripper geometry for the LIBERO oracle: candidate grasps from an object's collision boxes, the
+Panda hand as sample points for clearance tests, orientation helpers.
+
+Orientation convention (the stack's TCP frame): columns x, y = the fingers' closing axis, z = the approach
+axis (out of the palm, towards the fingertips). Top-down = z along world -z; ``R_DOWN`` = diag(1, -1, -1).
+
+Two grasp families, chosen from the object's category name and checked against its geometry:
+
+- **rim pinch** (bowls, ramekins, plates, mugs, moka pots, pans): one finger inside, one outside the wall at
+  the object's top ring; the closing axis is radial. Candidates: every collision box of the top ring (a
+  mug's handle, off the ring's radius, is not a candidate).
+- **top grasp** (boxes, cans, bottles, books, cartons, everything else): the fingers straddle the top slab
+  of the object across its narrowest horizontal width; yaws every 15 degrees, those the open hand spans.
+
+Every candidate is scored by the hand's clearance from everything else in the scene (the hand at the grasp
+and on its vertical approach) and by how far its wrist turns from the home yaw.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tcot_hybrid.libero.geometry import Boxes
+
+RIM_WORDS = ("bowl", "ramekin", "plate", "mug", "cup", "moka_pot", "pot", "pan", "frypan")
+MAX_SPAN_M = 0.072  # [m] widest slab the open hand closes on (8 cm between the pads, minus margin)
+FINGER_BELOW_TCP_M = 0.012  # [m] the finger meshes reach this far past the TCP (fingertip centre)
+APPROACH_DZ = 0.10  # [m] pre-grasp height above a grasp (vertical approach)
+
+E_Z = np.array([0.0, 0.0, 1.0])
+R_DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def frame(z_axis, y_axis) -> np.ndarray:
+    """Rotation with approach axis z and closing axis y (y is made orthogonal to z)."""
+    z = np.asarray(z_axis, float)
+    z = z / np.linalg.norm(z)
+    y = np.asarray(y_axis, float)
+    y = y - z * (y @ z)
+    y = y / np.linalg.norm(y)
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+# The hand's yaw (about world z, from the home hand) is kept in (YAW_MIN - 180, YAW_MIN] degrees. Measured on
+# the stove knob (libero_goal turn_on_the_stove, sampled seed 0): a +90 degree hand tripped joint 7's tracking
+# reflex on the way there (its 12 N m motor lags), the -90 degree hand turned the knob.
+YAW_MIN_RAD = np.deg2rad(60.0)
+
+
+def top_down(closing_xy) -> np.ndarray:
+    """Top-down hand whose fingers close along the horizontal direction ``closing_xy`` (either sign: the
+    one whose yaw is in (-120, 60] degrees, see YAW_MIN_RAD)."""
+    c = np.array([closing_xy[0], closing_xy[1], 0.0])
+    yaw = np.arctan2(c[0], -c[1])
+    if yaw > YAW_MIN_RAD or yaw <= YAW_MIN_RAD - np.pi:
+        c = -c
+    return frame(-E_Z, c)
+
+
+def rot_z(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def yaw_from_home(rot: np.ndarray) -> float:
+    """How far [rad] the hand's closing axis is turned about world z from the home hand's (-y)."""
+    y = rot[:, 1]
+    return float(np.arctan2(y[0], -y[1]))
+
+
+def _grid(lo, hi, n) -> np.ndarray:
+    axes = [np.linspace(a, b, k) for a, b, k in zip(lo, hi, n)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+
+
+# The Panda hand in the TCP frame (measured from robosuite's collision meshes, fingers fully open).
+_HAND = _grid((-0.032, -0.104, -0.124), (0.032, 0.104, -0.028), (3, 9, 4))
+_FINGERS = np.vstack([_grid((-0.011, s * 0.041, -0.05), (0.011, s * 0.062, FINGER_BELOW_TCP_M), (3, 2, 5))
+                      for s in (-1.0, 1.0)])
+_FINGERS_CLOSED = np.vstack([_grid((-0.011, s * 0.004, -0.05), (0.011, s * 0.025, FINGER_BELOW_TCP_M), (3, 2, 5))
+                             for s in (-1.0, 1.0)])
+
+
+def hand_points(pos, rot, *, closed: bool = False, fingers_only: bool = False) -> np.ndarray:
+    """World sample points of the hand (palm + fingers) with the TCP at ``pos``, oriented ``rot``."""
+    fingers = _FINGERS_CLOSED if closed else _FINGERS
+    local = fingers if fingers_only else np.vstack([_HAND, fingers])
+    return np.asarray(pos) + local @ np.asarray(rot).T
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A TCP pose [world] that holds the object, the family it came from and its score (lower is better)."""
+
+    pos: np.ndarray
+    rot: np.ndarray
+    kind: str
+    score: float
+    collisions: int
+
+
+def family(category: str) -> str:
+    c = category.lower()
+    return "rim" if any(w in c for w in RIM_WORDS) else "top"
+
+
+def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(TCP position, rotation) per box of the object's top ring, closing radially across the wall."""
+    lo, hi = obj.aabb()
+    centre = (lo + hi) / 2
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    tops = obj.centre[:, 2] + ext[:, 2]
+    top = tops.max()
+    radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
+    ring = (tops >= top - 0.02) & (radial >= 0.35 * radial.max())
+    if not ring.any():
+        return []
+    r_ring = float(np.median(radial[ring]))
+    ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+    height = hi[2] - lo[2]
+    out = []
+    for i in np.flatnonzero(ring):
+        u = obj.centre[i, :2] - centre[:2]
+        u = u / np.linalg.norm(u)
+        depth = min(0.02, 0.5 * height)
+        z = max(tops[i] - depth, lo[2] + FINGER_BELOW_TCP_M + 0.004)
+        p = np.array([obj.centre[i, 0], obj.centre[i, 1], z])
+        out.append((p, top_down(u)))
+    return out
+
+
+def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(TCP position, rotation) per yaw (15-degree steps) whose top slab the open hand spans."""
+    lo, hi = obj.aabb()
+    height = hi[2] - lo[2]
+    depth = min(0.03, 0.55 * height)
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    in_slab = (obj.centre[:, 2] + ext[:, 2] >= hi[2] - depth) & (obj.centre[:, 2] - ext[:, 2] <= hi[2])
+    slab = obj.select(in_slab)
+    z = max(hi[2] - depth + 0.008, lo[2] + FINGER_BELOW_TCP_M + 0.004)
+    out = []
+    for yaw in np.deg2rad(np.arange(0, 180, 15)):
+        R = rot_z(yaw)
+        s_lo, s_hi = slab.extents_in(R, np.zeros(3))
+        span = s_hi[1] - s_lo[1]
+        if span > MAX_SPAN_M:
+            continue
+        mid = R @ ((s_lo + s_hi) / 2)
+        p = np.array([mid[0], mid[1], z])
+        out.append((p, top_down(R[:, 1])))
+    return out
+
+
+def side_candidates(obj: Boxes, base_pos) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Horizontal grasps of a tall object (bottles): the hand comes from the robot's side (straight and 30
+    degrees either way), fingers closing horizontally on a 2.4 cm slab at 35-65 % of its height that the
+    open hand spans. Carried this way the object hangs a few cm below the hand instead of its full height."""
+    lo, hi = obj.aabb()
+    height = hi[2] - lo[2]
+    if height < 0.10 or height < 1.5 * min(hi[0] - lo[0], hi[1] - lo[1]):
+        return []
+    c = (lo + hi) / 2
+    d0 = c[:2] - np.asarray(base_pos)[:2]
+    d0 = d0 / np.linalg.norm(d0)
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    out = []
+    for frac in (0.35, 0.5, 0.65):
+        z = max(lo[2] + frac * height, lo[2] + 0.04)  # the palm (3.2 cm either side) stays off the support
+        sel = (obj.centre[:, 2] - ext[:, 2] <= z + 0.012) & (obj.centre[:, 2] + ext[:, 2] >= z - 0.012)
+        if not sel.any():
+            continue
+        slab = obj.select(sel)
+        for turn in np.deg2rad([0.0, 30.0, -30.0]):
+            d = rot_z(turn)[:2, :2] @ d0
+            a = np.array([d[0], d[1], 0.0])
+            y = np.cross(E_Z, a)
+            R = np.column_stack([a, y, E_Z])
+            s_lo, s_hi = slab.extents_in(R, np.zeros(3))
+            if s_hi[1] - s_lo[1] > MAX_SPAN_M:
+                continue
+            mid = R @ ((s_lo + s_hi) / 2)
+            for yy in (y, -y):
+                out.append((np.array([mid[0], mid[1], z]), frame(a, yy)))
+    return out
+
+
+def score_grasps(candidates, obstacles: Boxes, *, ground_z: float, kind: str, prefer=None) -> list[Grasp]:
+    """Score candidates: hand collisions at the grasp and on its vertical approach (margin 4 mm), points
+    below the ground, wrist turn from the home yaw, and an optional extra cost ``prefer(pos, rot)``."""
+    out = []
+    for pos, rot in candidates:
+        pts = [hand_points(pos, rot)]
+        for dz in (0.03, 0.06, APPROACH_DZ):  # back out along the approach axis
+            pts.append(hand_points(pos - rot[:, 2] * dz, rot))
+        pts = np.vstack(pts)
+        hits = int(obstacles.contains(pts, margin=0.004).sum()) + int((pts[:, 2] < ground_z).sum())
+        yaw = abs(yaw_from_home(rot)) if abs(rot[2, 2]) > 0.5 else 0.0
+        extra = prefer(pos, rot) if prefer is not None else 0.0
+        out.append(Grasp(pos=pos, rot=rot, kind=kind, score=hits * 1.0 + 0.3 * yaw + extra, collisions=hits))
+    return sorted(out, key=lambda g: g.score)

@@ -1,0 +1,532 @@
+"""The LIBERO oracle's scene knowledge and pick-and-place skill (joints: :mod:`tcot_hybrid.libero.joints`):
+pick-and-place onto/into anything. Keyframes come from privileged geometry (collision boxes,
+region sites, joint axes) read from MuJoCo, never from per-task tables.
+
+A script is a list of skills in one :class:`OracleContext`. The planner asks each not-yet-done skill for
+keyframes from the current world; a skill plans in the world as it *will be* once the earlier not-done
+skills have run (their :meth:`effect`: a joint at its goal value, an object at its place), so one global
+plan made at step 0 holds every step, and a local replan resumes wherever the episode is.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from tcot_hybrid.errors import PlanningError
+from tcot_hybrid.libero.geometry import Boxes, collision_boxes, subtree_bodies
+from tcot_hybrid.libero.grasps import (
+    APPROACH_DZ,
+    E_Z,
+    Grasp,
+    family,
+    frame,
+    hand_points,
+    rim_candidates,
+    rot_z,
+    score_grasps,
+    side_candidates,
+    top_candidates,
+)
+from tcot_hybrid.tasks.base import Keyframe, Skill, World
+
+ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
+TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
+RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
+LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
+
+
+def kf(p, closed: bool, rot=None) -> Keyframe:
+    return Keyframe(np.asarray(p, float).copy(), bool(closed), None if rot is None else np.asarray(rot, float))
+
+
+# --- the scene as the oracle sees it ------------------------------------------------------------------------
+
+@dataclass
+class Effect:
+    """What a skill changes: a joint's value or an object's origin (None: nothing predicted)."""
+
+    joint: int | None = None
+    q: float = 0.0
+    obj: str | None = None
+    pos: np.ndarray | None = None
+    carried: tuple[str, ...] = ()  # objects inside the moving part (a bowl in a drawer) move with it
+
+
+class OracleContext:
+    """Per-episode privileged scene knowledge: object and fixture body trees, obstacles, home pose."""
+
+    def __init__(self, task, world: World):
+        self.task, self.world = task, world
+        env = task.scene.env
+        self.env, self.model, self.data = env, world.model, world.data
+        m = self.model
+        self.bodies: dict[str, np.ndarray] = {}
+        self.category: dict[str, str] = {}
+        for name, obj in list(env.objects_dict.items()) + list(env.fixtures_dict.items()):
+            bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, obj.root_body)
+            if bid >= 0:
+                self.bodies[name] = subtree_bodies(m, bid)
+                self.category[name] = str(getattr(obj, "category_name", name))
+        robot = [b for b in range(m.nbody) if m.body(b).name.startswith(ROBOT_PREFIXES)]
+        self._robot = set(robot)
+        self.scene_bodies = np.array([b for b in range(1, m.nbody) if b not in self._robot], int)
+        self.home_tcp = world.tcp_pos()
+        base = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "robot0_base")
+        self.base_pos = self.data.xpos[base].copy() if base >= 0 else self.home_tcp.copy()
+        self.home_rot = world.tcp_rot()
+        self.skills: list["LiberoSkill"] = []
+        self.built_at = float(self.data.time)  # [s] simulation time the script was composed at
+        self.camera = getattr(task, "planner_camera", None) or "agentview"
+        self.image_px = int(getattr(task, "planner_image_px", None) or 128)
+        self._camera_model = None
+
+    # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
+    def in_view(self, p, *, margin_px: float = 2.0) -> bool:
+        """Whether world point ``p`` projects inside the planner camera's image, ``margin_px`` from its border
+        (the same camera model the planner projects plans with)."""
+        if self._camera_model is None:
+            from tcot_hybrid.camera import CameraModel
+
+            m = self.model
+            if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, self.camera) < 0:
+                return True
+            self._camera_model = CameraModel.from_mujoco(m, self.data, self.camera, width=self.image_px,
+                                                         height=self.image_px)
+        uv, depth = self._camera_model.project(np.asarray(p, float)[None])
+        return bool(depth[0] > 0 and self._camera_model.in_image(uv, margin_px=margin_px)[0])
+
+    def into_view(self, p, z_floor: float) -> np.ndarray:
+        """``p`` lowered (not below ``z_floor``) until the planner camera sees it; unchanged if it already
+        does or if no height down to the floor helps."""
+        p = np.asarray(p, float).copy()
+        if self.in_view(p):
+            return p
+        for z in np.arange(p[2] - 0.01, z_floor - 1e-9, -0.01):
+            q = np.array([p[0], p[1], z])
+            if self.in_view(q, margin_px=0.5):
+                return q
+        return p
+
+    # -- predictions -----------------------------------------------------------------------------------
+    def effects_before(self, skill: "LiberoSkill", world: World) -> list[Effect]:
+        out = []
+        for s in self.skills:
+            if s is skill:
+                break
+            if not s.done(world):
+                e = s.effect(world)
+                if e is not None:
+                    out.append(e)
+        return out
+
+    def boxes(self, bodies, effects: list[Effect]) -> Boxes:
+        """Collision boxes of ``bodies`` as they will be after ``effects``."""
+        bx = collision_boxes(self.model, self.data, bodies)
+        if not effects or len(bx) == 0:
+            return bx
+        centre, rot = bx.centre.copy(), bx.rot.copy()
+        body_of = self.model.geom_bodyid[bx.geom]
+        for e in effects:
+            R, anchor, t, moved = self._delta(e)
+            sel = np.isin(body_of, moved)
+            centre[sel] = (centre[sel] - anchor) @ R.T + anchor + t
+            rot[sel] = np.einsum("ij,njk->nik", R, rot[sel])
+        return Boxes(centre, rot, bx.half, bx.geom)
+
+    def point_after(self, point, body: int, effects: list[Effect]) -> np.ndarray:
+        p = np.asarray(point, float).copy()
+        for e in effects:
+            R, anchor, t, moved = self._delta(e)
+            if body in moved:
+                p = R @ (p - anchor) + anchor + t
+        return p
+
+    def rot_after(self, rot, body: int, effects: list[Effect]) -> np.ndarray:
+        r = np.asarray(rot, float).copy()
+        for e in effects:
+            R, _, _, moved = self._delta(e)
+            if body in moved:
+                r = R @ r
+        return r
+
+    def _delta(self, e: Effect):
+        m, d = self.model, self.data
+        if e.joint is not None:
+            j = e.joint
+            moved = subtree_bodies(m, int(m.jnt_bodyid[j]))
+            if e.carried:
+                moved = np.concatenate([moved] + [self.bodies[o] for o in e.carried])
+            dq = e.q - float(d.qpos[m.jnt_qposadr[j]])
+            axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
+            if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE):
+                return np.eye(3), np.zeros(3), axis * dq, moved
+            return axis_angle(axis, dq), d.xanchor[j].copy(), np.zeros(3), moved
+        moved = self.bodies[e.obj]
+        return np.eye(3), np.zeros(3), e.pos - self.world.pos(e.obj), moved
+
+    def obstacles(self, effects: list[Effect], *, exclude: tuple[str, ...] = ()) -> Boxes:
+        """Every scene collision box (no robot, no world body such as the floor), after ``effects``."""
+        skip = set()
+        for name in exclude:
+            skip.update(int(b) for b in self.bodies[name])
+        bodies = [b for b in self.scene_bodies if b not in skip]
+        return self.boxes(bodies, effects)
+
+    def object_boxes(self, name: str, effects: list[Effect]) -> Boxes:
+        return self.boxes(self.bodies[name], effects)
+
+    def ground_z(self) -> float:
+        """Lowest resting surface: no hand point may go below it (cached per simulation time)."""
+        t = float(self.data.time)
+        if getattr(self, "_ground", (None,))[0] != t:
+            lows = [self.object_boxes(n, []).aabb()[0][2] for n in self.task.scene.env.objects_dict
+                    if n in self.bodies and len(self.object_boxes(n, [])) > 0]
+            self._ground = (t, min(lows) - 0.002 if lows else 0.0)
+        return self._ground[1]
+
+    def clear_z(self, a_xy, b_xy, obstacles: Boxes, radius: float) -> float:
+        """Height of the highest obstacle top within ``radius`` of the segment a->b (xy)."""
+        if len(obstacles) == 0:
+            return -np.inf
+        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        lo, hi = obstacles.centre - ext, obstacles.centre + ext
+        a, b = np.asarray(a_xy[:2], float), np.asarray(b_xy[:2], float)
+        ts = np.linspace(0, 1, 25)
+        pts = a + (b - a) * ts[:, None]
+        near = np.zeros(len(lo), bool)
+        for p in pts:
+            dx = np.maximum(np.maximum(lo[:, 0] - p[0], p[0] - hi[:, 0]), 0)
+            dy = np.maximum(np.maximum(lo[:, 1] - p[1], p[1] - hi[:, 1]), 0)
+            near |= np.hypot(dx, dy) <= radius
+        return float(hi[near, 2].max()) if near.any() else -np.inf
+
+
+def axis_angle(axis, angle: float) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+# --- skills -------------------------------------------------------------------------------------------------
+
+class LiberoSkill(Skill):
+    ctx: OracleContext
+    predicate: list
+
+    def done(self, world: World) -> bool:
+        return bool(self.ctx.env._eval_predicate(self.predicate))
+
+    def keyframes(self, world: World) -> list[Keyframe]:
+        """The skill's keyframes; when an earlier step is still ahead (planning the whole script at once),
+        the hand first returns to its home pose so every step starts from the same posture."""
+        kfs = self._keyframes(world)
+        if self.ctx.effects_before(self, world):
+            kfs.insert(0, kf(self.ctx.home_tcp, False, self.ctx.home_rot))
+        return kfs
+
+    def effect(self, world: World) -> Effect | None:
+        return None
+
+
+@dataclass
+class Destination:
+    """Where a pick-and-place puts its object: on another object, on a region site, or in a region site."""
+
+    relation: str  # "on" | "in" | "aside"
+    target: str | None  # object name or region site name (None: a free spot, ``point``)
+    is_site: bool
+    slot: int = 0  # several objects to one destination: slot k of n (spread apart)
+    slots: int = 1
+    point: np.ndarray | None = None  # "aside": a free spot on the object's own support [m, world]
+
+
+class PickPlace(LiberoSkill):
+    """Grasp ``obj`` (rim pinch or top grasp from its geometry), carry it above the obstacles, lower it onto
+    or into the destination until the hand or the object would touch anything, release, lift."""
+
+    def __init__(self, ctx: OracleContext, obj: str, dest: Destination, predicate: list):
+        self.ctx, self.obj, self.dest, self.predicate = ctx, obj, dest, predicate
+        self.target = dest.target
+        self._place: np.ndarray | None = None
+
+    def done(self, world: World) -> bool:
+        if self.dest.point is not None:  # set aside: within 3 cm of the spot, released
+            return bool(np.linalg.norm(world.pos(self.obj)[:2] - self.dest.point[:2]) < 0.03
+                        and not world.is_held(self.obj))
+        return super().done(world) and not world.is_held(self.obj)
+
+    def effect(self, world: World) -> Effect | None:
+        plan = self._plan(world)
+        return Effect(obj=self.obj, pos=plan["obj_at_release"] - np.array([0, 0, RELEASE_GAP_M]))
+
+    # ---------------------------------------------------------------------------------------------------
+    def grasp(self, world: World, effects: list[Effect]) -> Grasp:
+        ctx = self.ctx
+        obj = ctx.object_boxes(self.obj, effects)
+        kind = family(ctx.category.get(self.obj, self.obj))
+        # rim-family objects (bowls, mugs, pots) get both kinds: a pot's "ring" may be its lid, and the
+        # fingers' clash with the object itself (below) sorts out which rim is a real, open rim
+        rims = rim_candidates(obj) if kind == "rim" else []
+        tops = top_candidates(obj)
+        cands = rims + tops
+        if not cands:
+            raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
+                                f"no rim and no top slab narrower than the open hand")
+        obstacles = ctx.obstacles(effects, exclude=(self.obj,))
+        cands = cands + tilted(cands, ctx.base_pos) + side_candidates(obj, ctx.base_pos)
+        bottom = float(obj.aabb()[0][2])
+
+        def prefer(pos, rot):
+            # nearer the robot is easier; far and low grasps want the hand tilted away from the robot
+            # (a vertical hand 0.6 m out at table height stretched the wrist into the tracking reflex)
+            reach = float(np.linalg.norm(pos[:2] - ctx.base_pos[:2]))
+            ideal = np.clip((reach - 0.45) / 0.25, 0.0, 1.0) * TILT_MAX_RAD
+            tilt = float(np.arccos(np.clip(-rot[2, 2], -1.0, 1.0)))
+            if tilt > 1.0:  # a side grasp (horizontal hand): no lean to compare
+                return 0.5 * reach + 0.3
+            return 0.5 * reach + 1.0 * abs(tilt - ideal)
+
+        n_rim = len(rims)
+        rim_ids = {id(c[1]) for c in rims}
+
+        def prefer_all(pos, rot):
+            cost = prefer(pos, rot)
+            if not (ctx.in_view(pos) and ctx.in_view(pos - rot[:, 2] * 0.02)):
+                cost += 5.0  # plans live in the planner camera's pixels: a grasp it cannot see is refused
+            # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
+            near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
+            own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
+            cost += float(own.sum())
+            # a tall object held near its top hangs its whole height below the hand: the carry then goes
+            # so high that the planner camera loses the hand (a wine bottle by the neck over the cabinet)
+            cost += 5.0 * max(0.0, float(pos[2] - bottom) - 0.08)
+            if kind == "rim" and not rim_ids.__contains__(id(rot)) and n_rim:
+                cost += 0.5  # a top grasp on a rim-family object only when no rim pinch is clean
+            return cost
+
+        graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
+        self.last_grasps = graded  # for inspection
+        return graded[0]
+
+    def _plan(self, world: World) -> dict:
+        """Grasp, release pose and carry height, from the world now (cached per simulation time: the planner
+        and every later step's prediction ask for it at the same instant)."""
+        t = float(self.ctx.data.time)
+        cached = getattr(self, "_plan_cache", None)
+        if cached is not None and cached[0] == t:
+            return cached[1]
+        out = self._plan_now(world)
+        self._plan_cache = (t, out)
+        return out
+
+    def _plan_now(self, world: World) -> dict:
+        ctx = self.ctx
+        effects = ctx.effects_before(self, world)
+        held = world.is_held(self.obj)
+        obj_pos = world.pos(self.obj) if not effects else ctx.point_after(
+            world.pos(self.obj), int(ctx.bodies[self.obj][0]), effects)
+        if held:
+            g_pos, g_rot = world.tcp_pos(), world.tcp_rot()
+        else:
+            g = self.grasp(world, effects)
+            g_pos, g_rot = g.pos, g.rot
+        obj_boxes = ctx.object_boxes(self.obj, effects)
+        # the object in the hand's frame (rigid while held)
+        rel_c = (obj_boxes.centre - g_pos) @ g_rot
+        rel_R = np.einsum("ji,njk->nik", g_rot, obj_boxes.rot)
+        rel_origin = g_rot.T @ (obj_pos - g_pos)
+        obstacles = ctx.obstacles(effects, exclude=(self.obj,))
+        start = world.tcp_pos() if held else g_pos
+        best = None
+        for place_xy, yaw in self._place_candidates(world, effects, obj_boxes, obj_pos):
+            R_place = rot_z(yaw) @ g_rot
+            tcp_xy = place_xy - (R_place @ rel_origin)[:2]
+
+            def carried(tcp, R_place=R_place) -> Boxes:
+                return Boxes(tcp + rel_c @ R_place.T, np.einsum("ij,njk->nik", R_place, rel_R), obj_boxes.half,
+                             obj_boxes.geom)
+
+            probe = carried(np.array([tcp_xy[0], tcp_xy[1], 0.0]))
+            lo, hi = probe.aabb()
+            near = _near(obstacles, lo - 0.12, hi + 0.12)
+            support = self._support_z(near, lo, hi)
+            z_min = support + RELEASE_GAP_M - lo[2]
+            top = ctx.clear_z(start, tcp_xy, obstacles, radius=0.08)
+            carry_z = max(top + TRAVEL_CLEARANCE_M - lo[2], start[2] + LIFT_M, z_min + 0.06)
+            def blocked(z):
+                tcp = np.array([tcp_xy[0], tcp_xy[1], z])
+                return bool(near.contains(hand_points(tcp, R_place, closed=True), margin=0.003).any()
+                            or self._boxes_hit(carried(tcp), near))
+
+            z = carry_z
+            for step in (0.03, 0.005):  # coarse, then fine
+                while z - step >= z_min - 1e-9 and not blocked(z - step):
+                    z -= step
+            if z - 0.005 < z_min and z > z_min and not blocked(z_min):
+                z = z_min
+            release_pt = np.array([tcp_xy[0], tcp_xy[1], z])
+            over = ctx.into_view([tcp_xy[0], tcp_xy[1], carry_z], max(top + 0.01 - lo[2], z + 0.03))
+            hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03]))
+                          and ctx.in_view(over))
+            key = (hidden, round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
+            if best is None or key < best[0]:
+                best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
+                                  carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
+        out = best[1]
+        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles,
+                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
+        return out
+
+    @staticmethod
+    def _boxes_hit(body: Boxes, obstacles: Boxes, margin: float = 0.002) -> bool:
+        """Conservative box-vs-box test: each carried box's corners and centre against the obstacles."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)] + [[0, 0, 0]], float)
+        pts = body.centre[:, None, :] + np.einsum("nij,nkj->nki", body.rot, signs[None] * body.half[:, None, :])
+        return bool(obstacles.contains(pts.reshape(-1, 3), margin=margin).any())
+
+    def _support_z(self, obstacles: Boxes, lo, hi) -> float:
+        """Top of the highest obstacle box under the footprint [lo, hi] (xy) whose top is below the
+        destination's reference height (a region's top, an object's top)."""
+        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        blo, bhi = obstacles.centre - ext, obstacles.centre + ext
+        over = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
+        ref = self._reference_top()
+        cand = over & (bhi[:, 2] <= ref + 1e-6)
+        if cand.any():
+            return float(bhi[cand, 2].max())
+        return self.ctx.ground_z()
+
+    def _reference_top(self) -> float:
+        ctx, d = self.ctx, self.dest
+        if d.point is not None:
+            return float(d.point[2] + 0.005)
+        if d.is_site:
+            sid = ctx.model.site(d.target).id
+            effects = ctx.effects_before(self, ctx.world)
+            pos = ctx.point_after(ctx.data.site_xpos[sid], int(ctx.model.site_bodyid[sid]), effects)
+            size = ctx.model.site_size[sid]
+            if d.relation == "in":
+                return float(pos[2] - size[2] + 0.02)
+            return float(pos[2] + size[2] + 0.10)
+        effects = ctx.effects_before(self, ctx.world)
+        return float(ctx.object_boxes(d.target, effects).aabb()[1][2] + 0.005)
+
+    def _region(self, world, effects):
+        """Destination frame: centre (3,), rotation, xy half size, and whether it is a region site."""
+        ctx, d = self.ctx, self.dest
+        if d.point is not None:
+            return np.asarray(d.point, float), np.eye(3), np.array([0.005, 0.005])
+        if d.is_site:
+            sid = ctx.model.site(d.target).id
+            bid = int(ctx.model.site_bodyid[sid])
+            centre = ctx.point_after(ctx.data.site_xpos[sid], bid, effects)
+            R = ctx.rot_after(ctx.data.site_xmat[sid].reshape(3, 3), bid, effects)
+            return centre, R, ctx.model.site_size[sid][:2].copy()
+        centre = ctx.point_after(world.pos(d.target), int(ctx.bodies[d.target][0]), effects)
+        return centre, np.eye(3), np.array([0.012, 0.012])
+
+    def _centre_xy(self, world, effects) -> np.ndarray:
+        centre, R, half = self._region(world, effects)
+        return centre[:2] + R[:2, :2] @ self._slot_offset(half)
+
+    def _slot_offset(self, half, axis: int | None = None) -> np.ndarray:
+        """This object's slot when several go to one destination: spread along ``axis`` of the region
+        (default: its longer one)."""
+        d = self.dest
+        offset = np.zeros(2)
+        if d.slots > 1:
+            if axis is None:
+                axis = 0 if half[0] >= half[1] else 1
+            span = half[axis] * 0.9
+            offset[axis] = -span + 2 * span * (d.slot + 0.5) / d.slots
+        return offset
+
+    def _place_candidates(self, world, effects, obj_boxes: Boxes, obj_pos):
+        """(object origin xy, hand yaw change) candidates: the region's centre (or this object's slot in it)
+        and, inside a region, a grid of offsets; the yaw is the one that best fits the footprint in the
+        region (books into narrow slots)."""
+        centre, R, half = self._region(world, effects)
+        best, best_yaw = -np.inf, 0.0
+        for yaw in np.deg2rad([0, 15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90]):
+            Rz = rot_z(yaw)
+            b = Boxes((obj_boxes.centre - obj_pos) @ Rz.T, np.einsum("ij,njk->nik", Rz, obj_boxes.rot),
+                      obj_boxes.half, obj_boxes.geom)
+            lo, hi = b.extents_in(R, np.zeros(3))
+            slack = float(np.min(np.concatenate([half - hi[:2], half + lo[:2]]))) if self.dest.is_site else 0.0
+            fit = min(slack, 0.01) - 0.002 * abs(yaw)
+            if fit > best + 1e-9:
+                best, best_yaw = fit, yaw
+        offsets = []
+        f = 0.6 if self.dest.slots == 1 else 0.5 / self.dest.slots
+        bases = [self._slot_offset(half, axis) for axis in ((None,) if self.dest.slots == 1 else (0, 1))]
+        if self.dest.slots == 2:  # two objects: also the region's diagonals, where they sit furthest apart
+            sgn = -1.0 if self.dest.slot == 0 else 1.0
+            bases += [sgn * 0.6 * half, sgn * 0.6 * half * np.array([1.0, -1.0])]
+        for base in bases:
+            offsets.append(base)
+            for fx in (-f, 0.0, f):
+                for fy in (-f, 0.0, f):
+                    if fx or fy:
+                        offsets.append(base + np.array([fx * half[0], fy * half[1]]))
+        for off in offsets:
+            yield centre[:2] + R[:2, :2] @ off, best_yaw
+
+    def _keyframes(self, world: World) -> list[Keyframe]:
+        ctx = self.ctx
+        p = self._plan(world)
+        obstacles = p["obstacles"]
+        kfs: list[Keyframe] = []
+        g_pos, g_rot = p["grasp_pos"], p["grasp_rot"]
+        release, R_place = p["release"], p["release_rot"]
+        if not p["held"]:
+            back = -g_rot[:, 2]  # out along the approach axis (up for a top-down hand)
+            pre = g_pos + back * APPROACH_DZ
+            kfs += [kf(pre, False, g_rot), kf(g_pos + back * 0.02, False, g_rot), kf(g_pos, False, g_rot),
+                    kf(g_pos, True, g_rot)]
+        start = world.tcp_pos() if p["held"] else g_pos
+        carry_z = p["carry_z"]
+        floor = p["carry_floor"]
+        # the lift only has to clear what is near the start (the carry then climbs towards the destination)
+        local = ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"]
+        lift = ctx.into_view([start[0], start[1], carry_z], max(local, start[2] + 0.03))
+        over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
+        kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
+                kf(over, True, R_place),
+                kf(release + np.array([0, 0, 0.03]), True, R_place),
+                kf(release, True, R_place),
+                kf(release, False, R_place)]
+        up = ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
+        kfs.append(kf(up, False, R_place))
+        if not p["held"]:
+            kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
+        return kfs
+
+
+TILT_MAX_RAD = np.deg2rad(30.0)  # [rad] most a grasp's approach leans away from the robot
+
+
+def tilted(cands, base_pos) -> list:
+    """Tilted copies of top-down candidates: the approach axis leans away from the robot's base by 15 and 30
+    degrees about the closing axis (only where the closing axis runs across the lean, so the fingers still
+    close on the same two faces)."""
+    out = []
+    for p, R in cands:
+        r = np.asarray(p[:2], float) - base_pos[:2]
+        if np.linalg.norm(r) < 1e-6 or R[2, 2] > -0.99:
+            continue
+        r = np.append(r / np.linalg.norm(r), 0.0)
+        if abs(R[:, 1] @ r) > 0.5:
+            continue
+        for th in (0.5 * TILT_MAX_RAD, TILT_MAX_RAD):
+            out.append((p, frame(-E_Z * np.cos(th) + r * np.sin(th), R[:, 1])))
+    return out
+
+
+def _near(boxes: Boxes, lo, hi) -> Boxes:
+    """The boxes whose xy bounds overlap [lo, hi] (xy)."""
+    ext = np.einsum("nij,nj->ni", np.abs(boxes.rot), boxes.half)
+    blo, bhi = boxes.centre - ext, boxes.centre + ext
+    keep = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
+    return boxes.select(keep)
