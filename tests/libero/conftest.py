@@ -8,7 +8,7 @@ SPATIAL_TASK = "libero_spatial:pick_up_the_black_bowl_between_the_plate_and_the_
 
 @pytest.fixture(scope="module")
 def libero_runner():
-    pytest.importorskip("libero")
+    pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.run_config import RunConfig
 

@@ -6,7 +6,7 @@ import pytest
 
 from tcot_hybrid.errors import ConfigError
 
-pytest.importorskip("libero")
+pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
 
 from tcot_hybrid.episode import EpisodeRunner  # noqa: E402
 from tcot_hybrid.libero.oracle import SUPPORTED_PREDICATES, goal_predicates  # noqa: E402

@@ -34,7 +34,7 @@ def test_robot_auto_follows_the_task():
 
 
 def test_every_registered_suite_is_listed(capsys):
-    pytest.importorskip("libero")
+    pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
     assert main(["list", "--json"]) == 0
     tasks = json.loads(capsys.readouterr().out)["tasks"]
     suites = {t["suite"] for t in tasks}
@@ -45,7 +45,7 @@ def test_every_registered_suite_is_listed(capsys):
 
 
 def test_bad_libero_names_and_init_states(tmp_path, capsys):
-    pytest.importorskip("libero")
+    pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
     with pytest.raises(ConfigError, match="suites: libero_spatial, libero_object"):
         make_task("libero_nope:x")
     with pytest.raises(ConfigError, match="did you mean"):
@@ -66,7 +66,7 @@ def test_bad_libero_names_and_init_states(tmp_path, capsys):
 
 
 def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path, capsys):
-    pytest.importorskip("libero")
+    pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
     cfg = tmp_path / "shipped.yaml"
     cfg.write_text("init: shipped\n")
     out = str(tmp_path / "d.hdf5")
