@@ -78,12 +78,13 @@ planner: setup
 LIBERO_SUITES := libero_spatial,libero_object,libero_goal,libero_10
 libero-oracle-eval: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init shipped --episodes 50 --seed-start 0 \
-		--workers 2 --out docs/eval-libero/oracle-shipped --readme README.md
-	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init sampled --episodes 10 --seed-start 90000 \
-		--workers 2 --out docs/eval-libero/oracle-sampled --readme README.md
+		--workers 2 --out docs/eval-libero/oracle-shipped
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init sampled --episodes 5 --seed-start 90000 \
+		--workers 2 --out docs/eval-libero/oracle-sampled
 	$(BIN)/tcot eval --suite libero_spatial,libero_10 --planners oracle --init shipped --episodes 10 --seed-start 0 \
 		--controllers computed_torque,joint_pd,osc,mpc --iks mink,pinocchio --workers 2 \
-		--out docs/eval-libero/controllers-ik --readme README.md
+		--out docs/eval-libero/controllers-ik
+	$(BIN)/python docs/eval-libero/summarize.py
 
 clean:
 	rm -rf runs .pytest_cache
