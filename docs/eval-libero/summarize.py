@@ -2,6 +2,7 @@
 files the `tcot eval` commands below wrote, into docs/eval-libero/summary.md, docs/libero.md and README.md:
 
     make libero-oracle-eval            # the three tcot eval runs (docs/eval-libero/*/)
+    .venv/bin/tcot bench --quick --out docs/eval-libero/bench-quick   # the LIBERO speed figures
     .venv/bin/python docs/eval-libero/summarize.py
 """
 from __future__ import annotations
@@ -71,6 +72,20 @@ def summary() -> str:
             lines.append(f"| {ctrl} | {ik} | " + " | ".join(rate(*s[(ctrl, ik, su)]) for su in suites) + " |")
         viol = max(c["max_joint_limit_violation_rad"] for c in r["cells"])
         lines += ["", f"Worst joint-limit violation {viol:.4f} rad.", ""]
+    b = HERE / "bench-quick" / "bench.json"
+    if b.is_file():
+        fig = json.loads(b.read_text())["figures"]
+        names = {"libero/scene_build_s": "scene build (LIBERO/robosuite compiles it)",
+                 "libero/mj_step_us": "bare mj_step",
+                 **{k: f"control tick, {k.rsplit('/', 1)[1]} (5 physics steps + controller)"
+                    for k in fig if k.startswith("libero/tick_us/")},
+                 "libero/render_planner_image_ms": "planner image render (128 px)",
+                 "libero/episode_real_time_factor": "oracle episode, real-time factor",
+                 "libero/episode_real_time_factor_rendering": "oracle episode rendering every planner step, RTF"}
+        lines += ["**Speed on a LIBERO tabletop scene** (`tcot bench --quick --out docs/eval-libero/bench-quick`, "
+                  "medians):", "", "| figure | median | unit |", "|---|---|---|"]
+        lines += [f"| {label} | {fig[k]['median']:.4g} | {fig[k]['unit']} |" for k, label in names.items() if k in fig]
+        lines.append("")
     return "\n".join(lines)
 
 

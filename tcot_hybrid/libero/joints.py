@@ -158,12 +158,7 @@ class MoveJoint(LiberoSkill):
         # gripper switch, and a plan that starts closed has its first switch far down the script
         above = p0 + np.array([0, 0, APPROACH_DZ])
         kfs = [kf(above, False, rot), kf(above, True, rot), kf(p0, True, rot)]
-        n = max(3, int(np.ceil(abs(turn) / 0.15)))
-        for k in range(1, n + 1):
-            Rk = rot_z(turn * k / n)
-            p = anchor + Rk @ (p0 - anchor)
-            p[2] = z
-            kfs.append(kf(p, True, rot))
+        kfs += arc_keyframes(anchor, p0, turn, rot, turn_hand=False)
         kfs.append(kf(kfs[-1].pos + np.array([0, 0, APPROACH_DZ]), True, rot))
         return kfs
 
@@ -181,16 +176,27 @@ class MoveJoint(LiberoSkill):
         rot0 = top_down(u)
         above = p0 + np.array([0, 0, APPROACH_DZ])
         kfs = [kf(above, False, rot0), kf(above, True, rot0), kf(p0, True, rot0)]
-        n = max(3, int(np.ceil(abs(turn) / 0.15)))
-        for k in range(1, n + 1):
-            Rk = rot_z(turn * k / n)
-            p = anchor + Rk @ (p0 - anchor)
-            p[2] = p0[2]
-            kfs.append(kf(p, True, Rk @ rot0))
+        kfs += arc_keyframes(anchor, p0, turn, rot0, turn_hand=True)
         last = kfs[-1]
         kfs.append(kf(last.pos - np.append(rot_z(turn)[:2, :2] @ normal, 0.0) * 0.05, True, last.rot))
         kfs.append(kf(kfs[-1].pos + np.array([0, 0, 0.08]), True, last.rot))
         return kfs
+
+
+ARC_STEP_RAD = 0.15  # [rad] keyframe spacing along a knob's or a door's arc
+
+
+def arc_keyframes(anchor, p0, turn: float, rot, *, turn_hand: bool) -> list[Keyframe]:
+    """Closed-gripper keyframes from ``p0`` along the arc of ``turn`` [rad] about the vertical through ``anchor``,
+    at ``p0``'s height (at least 3, every ARC_STEP_RAD); the hand keeps ``rot`` or turns with the arc."""
+    n = max(3, int(np.ceil(abs(turn) / ARC_STEP_RAD)))
+    out = []
+    for k in range(1, n + 1):
+        Rk = rot_z(turn * k / n)
+        p = anchor + Rk @ (p0 - anchor)
+        p[2] = p0[2]
+        out.append(kf(p, True, Rk @ rot if turn_hand else rot))
+    return out
 
 
 def pitched_home(approach) -> np.ndarray:
