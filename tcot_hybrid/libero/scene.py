@@ -83,6 +83,7 @@ def _env_class(problem_name: str):
 # building a scene costs 2.5-4 s against 1-2 s for a whole oracle episode. A Simulation takes a scene out
 # (no two simulations ever share one) and puts it back when it closes.
 _IDLE: dict[tuple[str, float], "LiberoScene"] = {}
+BUILD_SEED = 0  # numpy seed for LIBERO's fixture placement when a scene is built
 MAX_IDLE = 2
 
 
@@ -118,22 +119,32 @@ class LiberoScene:
     def build(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
         require_libero()
         bddl_path = Path(bddl_path)
-        with quiet_stdout():
-            import robosuite
-            import libero.libero.envs.bddl_utils as bddl_utils
+        state = np.random.get_state()
+        # robosuite's constructor resets the env, and LIBERO's sampler places the fixtures (cabinets, racks)
+        # from numpy's global generator: seeded, so every build of a task file puts them in the same place
+        # (unseeded they moved by up to 1.2 cm from one process to the next, and so did the oracle's grasps)
+        np.random.seed(BUILD_SEED)
+        try:
+            with quiet_stdout():
+                import robosuite
+                import libero.libero.envs.bddl_utils as bddl_utils
 
-            info = bddl_utils.get_problem_info(str(bddl_path))
-            env = _env_class(info["problem_name"])(
-                str(bddl_path), robots=["Panda"],
-                controller_configs=robosuite.load_controller_config(default_controller="OSC_POSE"),
-                gripper_types="default", initialization_noise=None, use_camera_obs=False,
-                has_renderer=False, has_offscreen_renderer=False, hard_reset=False, ignore_done=True,
-                camera_names=["agentview"], control_freq=20, horizon=100000,
-            )
+                info = bddl_utils.get_problem_info(str(bddl_path))
+                env = _env_class(info["problem_name"])(
+                    str(bddl_path), robots=["Panda"],
+                    controller_configs=robosuite.load_controller_config(default_controller="OSC_POSE"),
+                    gripper_types="default", initialization_noise=None, use_camera_obs=False,
+                    has_renderer=False, has_offscreen_renderer=False, hard_reset=False, ignore_done=True,
+                    camera_names=["agentview"], control_freq=20, horizon=100000,
+                )
+        finally:
+            np.random.set_state(state)
         model, data = env.sim.model._model, env.sim.data._data
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
-        return cls(env=env, model=model, data=data, bddl_path=bddl_path)
+        scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
+        scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
+        return scene
 
     # --- layouts ----------------------------------------------------------------------------------------
     def sample_layout(self, seed: int) -> None:
@@ -164,6 +175,9 @@ class LiberoScene:
         expected = 1 + m.nq + m.nv
         if state.shape != (expected,):
             raise ValueError(f"init state has {state.shape} values, the scene needs ({expected},)")
+        # fixtures are not in the state: put them where this scene's build placed them (a sampled layout
+        # of an earlier episode may have moved them)
+        m.body_pos[:], m.body_quat[:] = self.built_body_pose
         self.data.qpos[:] = state[1:1 + m.nq]
         self.data.qvel[:] = state[1 + m.nq:]
         mujoco.mj_forward(m, self.data)
