@@ -20,6 +20,7 @@ from tcot_hybrid.errors import SimulationError
 from tcot_hybrid.robot import RobotSpec
 from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.tasks import Task, World
+from tcot_hybrid.tasks.base import subtree_geoms
 
 # Warnings that mean the physics state can no longer be trusted.
 FATAL_WARNINGS = (
@@ -64,8 +65,8 @@ class Simulation:
         self._grip_sign = np.array([1.0, -1.0][: self._grip_acts.size])
         self.gripper_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.gripper_joints])
         finger_bodies = [int(m.jnt_bodyid[m.joint(j).id]) for j in robot.gripper_joints]
-        finger_geoms = tuple(tuple(int(g) for g in range(m.ngeom) if _in_subtree(m, int(m.geom_bodyid[g]), b))
-                             for b in finger_bodies)  # a finger's pads may sit in child bodies (robosuite)
+        # a finger's pads may sit in child bodies (robosuite)
+        finger_geoms = tuple(tuple(sorted(subtree_geoms(m, b))) for b in finger_bodies)
         self.world = World(m, self.data, self.objects, ee_site=robot.ee_site, finger_geoms=finger_geoms,
                            gripper=tuple((int(a), sign * robot.gripper_open, sign * robot.gripper_closed)
                                          for a, sign in zip(self._grip_acts, self._grip_sign)))
@@ -201,12 +202,6 @@ class Simulation:
             r.close()
         self._renderers.clear()
         self.task.release_scene()
-
-
-def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0 and body != root:
-        body = int(model.body_parentid[body])
-    return body == root
 
 
 def _pose(xpos, xmat) -> np.ndarray:

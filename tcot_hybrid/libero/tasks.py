@@ -80,10 +80,6 @@ def libero_suites() -> list[str]:
     return [s for s in STANDARD_SUITES if s in suites] + [s for s in suites if s not in STANDARD_SUITES]
 
 
-def is_libero_name(name: object) -> bool:
-    return isinstance(name, str) and (SEP in name or name.startswith("libero"))
-
-
 def make_libero_task(name: str) -> "LiberoTask":
     catalog = libero_catalog()
     if name not in catalog:

@@ -40,6 +40,17 @@ class Keyframe:
     rot: np.ndarray | None = None
 
 
+def subtree_geoms(model: mujoco.MjModel, body_id: int) -> frozenset[int]:
+    """Geom ids of ``body_id`` and every body below it (an object's parts, a finger's pads)."""
+    in_tree = np.zeros(model.nbody, bool)
+    for b in range(model.nbody):
+        p = b
+        while p > 0 and p != body_id:
+            p = model.body_parentid[p]
+        in_tree[b] = p == body_id
+    return frozenset(int(g) for g in np.flatnonzero(in_tree[model.geom_bodyid]))
+
+
 class World:
     """Read/write access to the simulated scene by object name (privileged: oracle, predicates, resets)."""
 
@@ -56,20 +67,7 @@ class World:
         self._site = model.site(ee_site).id
         self.fingers = tuple(frozenset(f) for f in finger_geoms)  # geom ids per finger
         self.finger_geoms = frozenset().union(*self.fingers)
-        self._geoms_of = {
-            name: frozenset(int(g) for g in np.flatnonzero(self._subtree_mask(self._body[name])))
-            for name in objects
-        }
-
-    def _subtree_mask(self, body_id: int) -> np.ndarray:
-        m = self.model
-        in_tree = np.zeros(m.nbody, bool)
-        for b in range(m.nbody):
-            p = b
-            while p > 0 and p != body_id:
-                p = m.body_parentid[p]
-            in_tree[b] = p == body_id
-        return in_tree[m.geom_bodyid]
+        self._geoms_of = {name: subtree_geoms(model, self._body[name]) for name in objects}
 
     def pos(self, name: str) -> np.ndarray:
         return self.data.xpos[self._body[name]].copy()
