@@ -152,6 +152,46 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+PART_PAD_M = 0.008  # [m] a pad's half width, less a margin
+PART_BAND_M = 0.015  # [m] half width of the strip a finger pair sweeps (pads 2.2 cm wide, plus margin)
+
+
+def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Top grasps of a narrow part of an object too wide to grasp whole (a moka pot's handle or spout):
+    per yaw whose whole top slab the hand cannot span, strips across the object 1 cm apart, each taken by
+    the boxes it crosses (down to the object's bottom: a handle reaches below the top slab); a strip the
+    open hand spans is a candidate, the TCP 2.2 cm below the strip's top."""
+    lo, hi = obj.aabb()
+    height = hi[2] - lo[2]
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    in_slab = obj.centre[:, 2] + ext[:, 2] >= hi[2] - min(0.03, 0.55 * height)
+    out = []
+    for yaw in np.deg2rad(np.arange(0, 180, 15)):
+        R = rot_z(yaw)
+        s_lo, s_hi = obj.select(in_slab).extents_in(R, np.zeros(3))
+        if s_hi[1] - s_lo[1] <= MAX_SPAN_M:
+            continue  # the whole slab fits: top_candidates has it
+        local_c = obj.centre @ R
+        local_ext = np.einsum("ji,njk,nk->ni", R, np.abs(obj.rot), obj.half)
+        b_lo, b_hi = local_c - local_ext, local_c + local_ext
+        for x in np.arange(s_lo[0], s_hi[0] + 1e-9, 0.01):
+            band = (b_hi[:, 0] >= x - PART_BAND_M) & (b_lo[:, 0] <= x + PART_BAND_M)
+            top = b_hi[band, 2].max() if band.any() else -np.inf
+            band &= b_hi[:, 2] >= top - 0.04  # what the fingers reach from the strip's top
+            if not band.any() or b_hi[band, 1].max() - b_lo[band, 1].min() > MAX_SPAN_M:
+                continue
+            spans = []  # the pads need parallel faces under their whole width: a strip off a rounded edge
+            for xs in (x - PART_PAD_M, x, x + PART_PAD_M):  # narrows (or ends) under a pad and squeezes out
+                cut = band & (b_lo[:, 0] <= xs) & (b_hi[:, 0] >= xs)
+                spans.append(b_hi[cut, 1].max() - b_lo[cut, 1].min() if cut.any() else -1.0)
+            if min(spans) < 0 or max(spans) - min(spans) > 0.006:
+                continue
+            z = max(top - 0.022, lo[2] + FINGER_BELOW_TCP_M + 0.004)
+            mid = R @ np.array([x, (b_hi[band, 1].max() + b_lo[band, 1].min()) / 2, 0.0])
+            out.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1])))
+    return out
+
+
 def side_candidates(obj: Boxes, base_pos) -> list[tuple[np.ndarray, np.ndarray]]:
     """Horizontal grasps of a tall object (bottles): the hand comes from the robot's side (straight and 30
     degrees either way), fingers closing horizontally on a 2.4 cm slab at 35-65 % of its height that the

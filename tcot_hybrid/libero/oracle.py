@@ -21,7 +21,8 @@ import scipy.spatial.transform  # noqa: F401
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.libero.joints import MoveJoint
 from tcot_hybrid.libero.geometry import Boxes, subtree_bodies
-from tcot_hybrid.libero.skills import Destination, Effect, LiberoSkill, OracleContext, PickPlace
+from tcot_hybrid.libero.grasps import hand_points
+from tcot_hybrid.libero.skills import RELEASE_GAP_M, Destination, Effect, LiberoSkill, OracleContext, PickPlace
 
 SUPPORTED_PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 JOINT_PREDICATES = {"open": "is_open", "close": "is_close", "turnon": "turn_on", "turnoff": "turn_off"}
@@ -29,6 +30,7 @@ SLIDE_DEPTH_M = 0.008  # [m] a slide goal this far inside the predicate's interv
 SLIDE_PUSH_M = 0.03  # [m] the hand moves this much further (the joint limit stops the part; the pinch slips ~2 cm)
 HINGE_DEPTH_RAD = 0.35  # [rad] a hinge goal this far inside the predicate's interval
 HINGE_PUSH_RAD = 0.10  # [rad]
+ASIDE_MIN_REACH_M = 0.55  # [m] set-aside spots nearer the robot's base than this cost extra (see _aside_spot)
 TRAVEL_ABOVE_GROUND_M = 0.25  # [m] LiberoTask.travel_z above the lowest resting surface
 
 
@@ -135,18 +137,29 @@ def _in_the_way(ctx: OracleContext, obj: str, step: MoveJoint) -> bool:
 
 def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint) -> np.ndarray | None:
     """A free spot for ``obj`` on its own support, clear of ``step``'s part at its goal and of everything else,
-    in the planner camera's view: the nearest of rings 10-25 cm around it."""
+    in the planner camera's view: on rings 10-25 cm around it, the nearest, with a spot closer than
+    ASIDE_MIN_REACH_M to the robot's base counted as further away (the arm folds to put a bowl down there, and
+    joint 6's 12 N m motor lagged into the tracking reflex: libero_goal open_the_top_drawer_and_put_the_bowl_inside,
+    sampled seed 2000)."""
     boxes = ctx.object_boxes(obj, [])
     origin = ctx.world.pos(obj)
     lo, hi = boxes.aabb()
     obstacles = ctx.obstacles([Effect(joint=step.joint, q=step.q_push)], exclude=(obj,))
     ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
     tops = obstacles.centre[:, 2] + ext[:, 2]
+    # the hand puts it down the way it picks it up: its closed hand, shifted with the object, must fit there too
+    # (next to the cabinet the hand stopped 19 cm up and the bowl fell)
+    grasp = PickPlace(ctx, obj, Destination(relation="aside", target=None, is_site=False, point=origin), []).grasp(
+        ctx.world, [])
+    hand = hand_points(grasp.pos + np.array([0.0, 0.0, RELEASE_GAP_M]), grasp.rot, closed=True)
+    best = None
     for radius in (0.10, 0.15, 0.20, 0.25):
         for ang in np.deg2rad(np.arange(0, 360, 30)):
             d = radius * np.array([np.cos(ang), np.sin(ang), 0.0])
             moved = Boxes(boxes.centre + d + np.array([0, 0, 0.015]), boxes.rot, boxes.half, boxes.geom)
             if PickPlace._boxes_hit(moved, obstacles, margin=0.012):  # (lifted off its support for the test)
+                continue
+            if obstacles.contains(hand + d, margin=0.004).any():
                 continue
             # the same support: whatever is under the new footprint tops out where the old support did
             under = obstacles.select((np.abs(obstacles.centre[:, 0] - (origin[0] + d[0])) <= ext[:, 0])
@@ -156,8 +169,11 @@ def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint) -> np.ndarray | N
                 continue
             spot = origin + d
             if ctx.in_view(spot) and ctx.in_view(spot + np.array([0, 0, hi[2] - lo[2] + 0.05])):
-                return spot
-    return None
+                reach = float(np.linalg.norm(spot[:2] - ctx.base_pos[:2]))
+                cost = radius + 2.0 * max(0.0, ASIDE_MIN_REACH_M - reach)
+                if best is None or cost < best[0] - 1e-9:
+                    best = (cost, spot)
+    return None if best is None else best[1]
 
 
 def _articulated_joints(ctx: OracleContext, name: str) -> list[int]:

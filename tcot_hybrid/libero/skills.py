@@ -26,6 +26,7 @@ from tcot_hybrid.libero.grasps import (
     rim_candidates,
     rot_z,
     score_grasps,
+    part_candidates,
     side_candidates,
     top_candidates,
 )
@@ -35,6 +36,11 @@ ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
 TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
 RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
+TRANSIT_RADIUS_M = 0.10  # [m] obstacles this close to the hand's straight way in count (the palm is 21 cm wide)
+TRANSIT_CLEARANCE_M = 0.05  # [m] the TCP this far above them on the way in
+SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is dragged out from under something
+SLIDE_MAX_M = 0.10  # [m] furthest such a drag
+SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
 
 
 def kf(p, closed: bool, rot=None) -> Keyframe:
@@ -270,13 +276,16 @@ class PickPlace(LiberoSkill):
         # fingers' clash with the object itself (below) sorts out which rim is a real, open rim
         rims = rim_candidates(obj) if kind == "rim" else []
         tops = top_candidates(obj)
-        cands = rims + tops
+        parts = part_candidates(obj) if not tops else []
+        cands = rims + tops + parts
         if not cands:
             raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
                                 f"no rim and no top slab narrower than the open hand")
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
-        cands = cands + tilted(cands, ctx.base_pos) + side_candidates(obj, ctx.base_pos)
+        parts = parts + tilted(parts, ctx.base_pos)
+        cands = rims + tops + tilted(rims + tops, ctx.base_pos) + parts + side_candidates(obj, ctx.base_pos)
         bottom = float(obj.aabb()[0][2])
+        centre_xy = obj.centre[:, :2].mean(axis=0) if len(obj) else np.zeros(2)
 
         def prefer(pos, rot):
             # nearer the robot is easier; far and low grasps want the hand tilted away from the robot
@@ -290,6 +299,7 @@ class PickPlace(LiberoSkill):
 
         n_rim = len(rims)
         rim_ids = {id(c[1]) for c in rims}
+        part_ids = {id(c[1]) for c in parts}
 
         def prefer_all(pos, rot):
             cost = prefer(pos, rot)
@@ -297,6 +307,8 @@ class PickPlace(LiberoSkill):
                 cost += 5.0  # plans live in the planner camera's pixels: a grasp it cannot see is refused
             # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
             near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
+            if id(rot) in part_ids:  # a part's strip lies between the open fingers: nothing may be under them
+                near[:] = True
             own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
             cost += float(own.sum())
             # a tall object held near its top hangs its whole height below the hand: the carry then goes
@@ -304,6 +316,8 @@ class PickPlace(LiberoSkill):
             cost += 5.0 * max(0.0, float(pos[2] - bottom) - 0.08)
             if kind == "rim" and not rim_ids.__contains__(id(rot)) and n_rim:
                 cost += 0.5  # a top grasp on a rim-family object only when no rim pinch is clean
+            if parts:  # a part far from the object's middle tilts it in the fingers
+                cost += 5.0 * float(np.linalg.norm(pos[:2] - centre_xy))
             return cost
 
         graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
@@ -375,9 +389,44 @@ class PickPlace(LiberoSkill):
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
         out = best[1]
-        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles,
+        slide = None if held else self._slide_out(g_pos, g_rot, rel_c, rel_R, obj_boxes, obstacles)
+        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles, slide=slide,
                    obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
         return out
+
+    def _slide_out(self, g_pos, g_rot, rel_c, rel_R, obj_boxes: Boxes, obstacles: Boxes) -> np.ndarray | None:
+        """Where to drag the grasped object (TCP position, raised SLIDE_RAISE_M) before lifting it, when a
+        straight lift would hit something above it (a bowl at the back of a drawer, half under the cabinet's
+        top panel): the shortest horizontal move, within SLIDE_MAX_M, along which the object and the closed
+        hand stay clear and from whose end the lift is clear. None when the straight lift is clear (or no
+        move frees it: the lift is then tried as it is)."""
+        def carried(tcp) -> Boxes:
+            return Boxes(tcp + rel_c @ g_rot.T, np.einsum("ij,njk->nik", g_rot, rel_R), obj_boxes.half,
+                         obj_boxes.geom)
+
+        lo, hi = obj_boxes.aabb()
+        near = _near(obstacles, lo - 0.25, hi + 0.25)
+
+        def clear(tcp) -> bool:
+            return not (self._boxes_hit(carried(tcp), near)
+                        or near.contains(hand_points(tcp, g_rot, closed=True), margin=0.002).any())
+
+        raised = g_pos + np.array([0.0, 0.0, SLIDE_RAISE_M])
+
+        def lift_clear(base) -> bool:
+            return all(clear(base + np.array([0.0, 0.0, dz])) for dz in np.arange(0.01, SLIDE_LIFT_CHECK_M + 1e-9,
+                                                                                  0.01))
+
+        if lift_clear(raised):
+            return None
+        for dist in np.arange(0.01, SLIDE_MAX_M + 1e-9, 0.01):
+            for ang in np.deg2rad(np.arange(0.0, 360.0, 22.5)):
+                d = np.array([np.cos(ang), np.sin(ang), 0.0])
+                end = raised + d * dist
+                path = [raised + d * s for s in np.arange(0.005, dist + 1e-9, 0.005)]
+                if lift_clear(end) and all(clear(q) for q in path):
+                    return end
+        return None
 
     @staticmethod
     def _boxes_hit(body: Boxes, obstacles: Boxes, margin: float = 0.002) -> bool:
@@ -486,6 +535,9 @@ class PickPlace(LiberoSkill):
             kfs += [kf(pre, False, g_rot), kf(g_pos + back * 0.02, False, g_rot), kf(g_pos, False, g_rot),
                     kf(g_pos, True, g_rot)]
         start = world.tcp_pos() if p["held"] else g_pos
+        if p["slide"] is not None:  # drag it out from under an overhang first
+            kfs += [kf(g_pos + np.array([0.0, 0.0, SLIDE_RAISE_M]), True, g_rot), kf(p["slide"], True, g_rot)]
+            start = p["slide"]
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
         # the lift only has to clear what is near the start (the carry then climbs towards the destination)
@@ -501,6 +553,13 @@ class PickPlace(LiberoSkill):
         kfs.append(kf(up, False, R_place))
         if not p["held"]:
             kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
+            # the way in: the hand comes from home (or from where it is) above whatever stands between (a
+            # drawer the previous step pulled out stopped the hand on its way to a bowl behind it)
+            start = ctx.home_tcp if ctx.effects_before(self, world) else world.tcp_pos()
+            pre = kfs[0].pos
+            z_safe = ctx.clear_z(start, pre, obstacles, radius=TRANSIT_RADIUS_M) + TRANSIT_CLEARANCE_M
+            if pre[2] < z_safe:
+                kfs.insert(0, kf(ctx.into_view([pre[0], pre[1], z_safe], pre[2]), False, g_rot))
         return kfs
 
 
