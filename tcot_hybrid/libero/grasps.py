@@ -152,6 +152,8 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+PART_MAX_SPAN_M = 0.05  # [m] a part's strip leaves the open fingers room (a 7 cm strip across a moka pot's
+#                         body had the tilted fingers land on its lid)
 PART_PAD_M = 0.008  # [m] a pad's half width, less a margin
 PART_BAND_M = 0.015  # [m] half width of the strip a finger pair sweeps (pads 2.2 cm wide, plus margin)
 
@@ -178,7 +180,7 @@ def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
             band = (b_hi[:, 0] >= x - PART_BAND_M) & (b_lo[:, 0] <= x + PART_BAND_M)
             top = b_hi[band, 2].max() if band.any() else -np.inf
             band &= b_hi[:, 2] >= top - 0.04  # what the fingers reach from the strip's top
-            if not band.any() or b_hi[band, 1].max() - b_lo[band, 1].min() > MAX_SPAN_M:
+            if not band.any() or b_hi[band, 1].max() - b_lo[band, 1].min() > PART_MAX_SPAN_M:
                 continue
             spans = []  # the pads need parallel faces under their whole width: a strip off a rounded edge
             for xs in (x - PART_PAD_M, x, x + PART_PAD_M):  # narrows (or ends) under a pad and squeezes out
