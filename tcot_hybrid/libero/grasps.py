@@ -24,6 +24,7 @@ import numpy as np
 from tcot_hybrid.libero.geometry import Boxes
 
 RIM_WORDS = ("bowl", "ramekin", "plate", "mug", "cup", "moka_pot", "pot", "pan", "frypan")
+ALIGN_SLACK_M = 0.006  # [m] top grasps close on at most this much more than the object's narrowest width
 MAX_SPAN_M = 0.072  # [m] widest slab the open hand closes on (8 cm between the pads, minus margin)
 FINGER_BELOW_TCP_M = 0.012  # [m] the finger meshes reach this far past the TCP (fingertip centre)
 APPROACH_DZ = 0.10  # [m] pre-grasp height above a grasp (vertical approach)
@@ -130,6 +131,27 @@ def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def candidate_yaws(obj: Boxes) -> np.ndarray:
+    """Hand yaws [rad, 0..pi) to try: every 15 degrees, plus the object's own face directions (the largest
+    boxes' horizontal axes): fingers 7 degrees off a book's faces turned it as they closed, and the turned
+    book no longer fitted the caddy's slot it had been aimed at."""
+    yaws = list(np.deg2rad(np.arange(0, 180, 15)))
+    if len(obj):
+        for i in np.argsort(-np.prod(obj.half, axis=1))[:3]:
+            for k in range(3):
+                a = obj.rot[i][:, k]
+                if abs(a[2]) < 0.3:
+                    for extra in (0.0, np.pi / 2):
+                        yaws.append((np.arctan2(a[1], a[0]) + extra) % np.pi)
+    yaws = np.array(yaws)
+    keep = [0]
+    for i in range(1, len(yaws)):  # drop near-duplicates (within 2 degrees, modulo pi)
+        d = np.abs((yaws[keep] - yaws[i] + np.pi / 2) % np.pi - np.pi / 2)
+        if d.min() > np.deg2rad(2.0):
+            keep.append(i)
+    return yaws[keep]
+
+
 def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     """(TCP position, rotation) per yaw (15-degree steps) whose top slab the open hand spans."""
     lo, hi = obj.aabb()
@@ -139,16 +161,20 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     in_slab = (obj.centre[:, 2] + ext[:, 2] >= hi[2] - depth) & (obj.centre[:, 2] - ext[:, 2] <= hi[2])
     slab = obj.select(in_slab)
     z = max(hi[2] - depth + 0.008, lo[2] + FINGER_BELOW_TCP_M + 0.004)
-    out = []
-    for yaw in np.deg2rad(np.arange(0, 180, 15)):
+    fits = []
+    for yaw in candidate_yaws(slab):
         R = rot_z(yaw)
         s_lo, s_hi = slab.extents_in(R, np.zeros(3))
         span = s_hi[1] - s_lo[1]
-        if span > MAX_SPAN_M:
-            continue
+        if span <= MAX_SPAN_M:
+            fits.append((span, R, s_lo, s_hi))
+    out = []
+    narrowest = min((f[0] for f in fits), default=0.0)
+    for span, R, s_lo, s_hi in fits:
+        if span > narrowest + ALIGN_SLACK_M:
+            continue  # fingers oblique to the faces turn the object as they close (a book, 16 degrees)
         mid = R @ ((s_lo + s_hi) / 2)
-        p = np.array([mid[0], mid[1], z])
-        out.append((p, top_down(R[:, 1])))
+        out.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1])))
     return out
 
 
