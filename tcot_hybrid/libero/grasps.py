@@ -193,14 +193,14 @@ def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     height = hi[2] - lo[2]
     ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
     in_slab = obj.centre[:, 2] + ext[:, 2] >= hi[2] - min(0.03, 0.55 * height)
-    out = []
-    for yaw in np.deg2rad(np.arange(0, 180, 15)):
+    found = []
+    for yaw in candidate_yaws(obj):
         R = rot_z(yaw)
         s_lo, s_hi = obj.select(in_slab).extents_in(R, np.zeros(3))
         if s_hi[1] - s_lo[1] <= MAX_SPAN_M:
             continue  # the whole slab fits: top_candidates has it
         local_c = obj.centre @ R
-        local_ext = np.einsum("ji,njk,nk->ni", R, np.abs(obj.rot), obj.half)
+        local_ext = np.einsum("nij,nj->ni", np.abs(np.einsum("ji,njk->nik", R, obj.rot)), obj.half)
         b_lo, b_hi = local_c - local_ext, local_c + local_ext
         for x in np.arange(s_lo[0], s_hi[0] + 1e-9, 0.01):
             band = (b_hi[:, 0] >= x - PART_BAND_M) & (b_lo[:, 0] <= x + PART_BAND_M)
@@ -216,7 +216,14 @@ def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
                 continue
             z = max(top - 0.022, lo[2] + FINGER_BELOW_TCP_M + 0.004)
             mid = R @ np.array([x, (b_hi[band, 1].max() + b_lo[band, 1].min()) / 2, 0.0])
-            out.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1])))
+            found.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1]), float(np.mean(spans))))
+    # as for whole objects: fingers close on the part's faces, so of the strips over one spot (1.5 cm) only
+    # the narrowest ones stay
+    out = []
+    for p, R, span in found:
+        near = [f[2] for f in found if np.linalg.norm(f[0][:2] - p[:2]) < 0.015]
+        if span <= min(near) + ALIGN_SLACK_M:
+            out.append((p, R))
     return out
 
 
