@@ -553,12 +553,15 @@ class PickPlace(LiberoSkill):
         kfs.append(kf(up, False, R_place))
         if not p["held"]:
             kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
-            # the way in: the hand comes from home (or from where it is) above whatever stands between (a
-            # drawer the previous step pulled out stopped the hand on its way to a bowl behind it)
+            # the way in: when the straight way from home (or from where the hand is) would hit something, the
+            # hand comes in above it (a drawer the previous step pulled out stopped the hand on its way to a
+            # bowl behind it)
             start = ctx.home_tcp if ctx.effects_before(self, world) else world.tcp_pos()
             pre = kfs[0].pos
             z_safe = ctx.clear_z(start, pre, obstacles, radius=TRANSIT_RADIUS_M) + TRANSIT_CLEARANCE_M
-            if pre[2] < z_safe:
+            n = max(2, int(np.linalg.norm(pre - start) / 0.02))
+            path = np.vstack([hand_points(start + (pre - start) * f, g_rot) for f in np.linspace(0.2, 1.0, n)])
+            if pre[2] < z_safe and obstacles.contains(path, margin=0.0).any():
                 kfs.insert(0, kf(ctx.into_view([pre[0], pre[1], z_safe], pre[2]), False, g_rot))
         return kfs
 
