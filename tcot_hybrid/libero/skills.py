@@ -38,6 +38,7 @@ RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
 TRANSIT_RADIUS_M = 0.10  # [m] obstacles this close to the hand's straight way in count (the palm is 21 cm wide)
 TRANSIT_CLEARANCE_M = 0.05  # [m] the TCP this far above them on the way in
+GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves the planner camera's view
 SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is dragged out from under something
 SLIDE_MAX_M = 0.10  # [m] furthest such a drag
 SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
@@ -321,7 +322,7 @@ class PickPlace(LiberoSkill):
             return cost
 
         graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
-        self.last_grasps = graded  # for inspection
+        self.last_grasps = graded  # for inspection, and for _plan_now's fallbacks
         return graded[0]
 
     def _plan(self, world: World) -> dict:
@@ -342,10 +343,20 @@ class PickPlace(LiberoSkill):
         obj_pos = world.pos(self.obj) if not effects else ctx.point_after(
             world.pos(self.obj), int(ctx.bodies[self.obj][0]), effects)
         if held:
-            g_pos, g_rot = world.tcp_pos(), world.tcp_rot()
-        else:
-            g = self.grasp(world, effects)
-            g_pos, g_rot = g.pos, g.rot
+            return self._plan_with(world, effects, held, obj_pos, world.tcp_pos(), world.tcp_rot())
+        best = self.grasp(world, effects)
+        # plans live in the planner camera's pixels: a grasp whose lift or carry leaves the view (a wine bottle
+        # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view
+        first = None
+        for g in [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]:
+            out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
+            if not out["hidden"]:
+                return out
+            first = first or out
+        return first
+
+    def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
+        ctx = self.ctx
         obj_boxes = ctx.object_boxes(self.obj, effects)
         # the object in the hand's frame (rigid while held)
         rel_c = (obj_boxes.centre - g_pos) @ g_rot
@@ -390,8 +401,14 @@ class PickPlace(LiberoSkill):
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
         out = best[1]
         slide = None if held else self._slide_out(g_pos, g_rot, rel_c, rel_R, obj_boxes, obstacles)
+        lift_from = slide if slide is not None else start
+        held_boxes = Boxes(rel_c @ g_rot.T, np.einsum("ij,njk->nik", g_rot, rel_R), obj_boxes.half, obj_boxes.geom)
+        below = float(-held_boxes.aabb()[0][2])  # how far the object hangs under the TCP, held as grasped
+        lift_floor = max(ctx.clear_z(lift_from, lift_from, obstacles, radius=0.08) + 0.02 + below, lift_from[2] + 0.03)
+        lift = ctx.into_view([lift_from[0], lift_from[1], best[1]["carry_z"]], lift_floor)
         out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles, slide=slide,
-                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
+                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
+                   hidden=bool(best[0][0]) or not ctx.in_view(lift))
         return out
 
     def _slide_out(self, g_pos, g_rot, rel_c, rel_R, obj_boxes: Boxes, obstacles: Boxes) -> np.ndarray | None:
@@ -541,8 +558,9 @@ class PickPlace(LiberoSkill):
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
         # the lift only has to clear what is near the start (the carry then climbs towards the destination)
-        local = ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"]
-        lift = ctx.into_view([start[0], start[1], carry_z], max(local, start[2] + 0.03))
+        lift = p["lift"] if not p["held"] else ctx.into_view(
+            [start[0], start[1], carry_z],
+            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2] + 0.03))
         over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
         kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
                 kf(over, True, R_place),
