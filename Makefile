@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup libero demo test bench planner libero-oracle-eval clean
+.PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -85,6 +85,22 @@ libero-oracle-eval: setup
 		--controllers computed_torque,joint_pd,osc,mpc --iks mink,pinocchio --workers 2 \
 		--out docs/eval-libero/controllers-ik
 	$(BIN)/python docs/eval-libero/summarize.py
+
+# The shipped LIBERO planner from nothing (docs/libero-planner.md): oracle demonstrations of the four suites' 40 tasks
+# on sampled layouts, training seeds 0.. (docs/seeds.md; never the shipped init states, the test set), a planner
+# image every 3rd planner step (LIBERO frames cost 28-80 ms), then one training run; the checkpoint is copied to
+# tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks on LIBERO tasks. The issue asks
+# for 50 demonstrations per task; LIBERO_PLANNER_EPISODES sets how many (the shipped one: see docs/libero-planner.md).
+LIBERO_PLANNER_EPISODES ?= 10
+libero-planner: setup
+	@date +%s > runs/.libero-planner-t0 2>/dev/null || (mkdir -p runs && date +%s > runs/.libero-planner-t0)
+	$(BIN)/tcot collect --suite $(LIBERO_SUITES) --episodes-per-task $(LIBERO_PLANNER_EPISODES) --seed-start 0 \
+		--image-every 3 --workers 2 --out data/demos_libero_panda.hdf5
+	@echo "collection: $$(( ($$(date +%s) - $$(cat runs/.libero-planner-t0)) / 60 )) min since start"
+	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite
+	cp runs/libero/planner.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
+	cp runs/libero/planner.json tcot_hybrid/checkpoints/libero_panda_default.json
+	@echo "libero-planner: $$(( ($$(date +%s) - $$(cat runs/.libero-planner-t0)) / 60 )) min from nothing"
 
 clean:
 	rm -rf runs .pytest_cache
