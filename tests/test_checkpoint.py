@@ -315,3 +315,16 @@ def test_libero_robot_without_a_shipped_checkpoint_points_to_make_libero_planner
     monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
     with pytest.raises(CheckpointError, match="libero_panda.*make libero-planner"):
         default_checkpoint("libero_panda")
+
+
+def test_shipped_libero_checkpoint_is_small_and_made_for_libero():
+    """`--planner learned` on a LIBERO task loads the libero_panda default: a LIBERO checkpoint (world, per-scene
+    camera, heights from the camera, a rotation head) for the bundled libero_panda's model, under 10 MB."""
+    from tcot_hybrid.robot import load_robot_spec
+
+    path = default_checkpoint("libero_panda")
+    assert path.stat().st_size < 10e6
+    ck = load_checkpoint(path, robot_spec=load_robot_spec("libero_panda"), kind="trajectory", world="libero")
+    assert ck.meta["camera"]["per_scene"] and ck.meta["height_ref"] == "camera" and ck.model.cfg.rot_head
+    with pytest.raises(CheckpointError, match="'libero' world"):
+        load_checkpoint(path, world="workcell")
