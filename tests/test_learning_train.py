@@ -183,11 +183,16 @@ def test_example_train_configs_load_and_chain():
     round8 = load_train_config(root / "train_stage2_round8.yaml")  # same data, event-spaced global windows
     assert round8.init == round6.out and round8.extra_data == round6.extra_data
     assert set(round8.online_data) == set(round6.online_data) and round8.windows.global_spacing == "events"
+    # round 10: the detector alone, from round 8, on new strict-labelled data; same label windows as round 8
+    round10 = load_train_config(root / "train_stage2_round10.yaml")
+    assert round10.init == round8.out and round10.trainable == "detect" and round10.model.detect_head
+    assert round10.windows == round8.windows and round10.model.readout_radius_cells == round8.model.readout_radius_cells
     # the shipped checkpoint is the last round's output, with that round's config
     shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
-    assert shipped["train_config"]["out"] == round8.out
-    assert shipped["model"]["readout_radius_cells"] == round8.model.readout_radius_cells
-    assert windows_from_meta(shipped["windows"]) == round8.windows
+    assert shipped["train_config"]["out"] == round10.out
+    assert shipped["model"]["readout_radius_cells"] == round10.model.readout_radius_cells
+    assert shipped["model"]["detect_head"] is True
+    assert windows_from_meta(shipped["windows"]) == round10.windows
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
