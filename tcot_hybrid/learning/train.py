@@ -57,7 +57,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
                                n_local=cfg.windows.L_l + 1, image_px=int(env["height"]))
     if int(env["height"]) != int(env["width"]):
         raise ConfigError(f"planner images must be square, data has {env['width']}x{env['height']}")
-    load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon)
+    load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon,
+                height_ref=cfg.height_ref)
     tr = load_frames(cfg.data, "train", vocab, max_demos=cfg.max_train_demos, **load)
     va = load_frames(cfg.data, "valid", vocab, **load)
     log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
@@ -143,7 +144,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             m = direct_metrics(model, va, vidx)
             score = m["delta_cm_median"]
         else:
-            m = trajectory_metrics(model, va, vidx, camera, n_global=mcfg.n_global, center=cfg.windows.global_center)
+            m = trajectory_metrics(model, va, vidx, n_global=mcfg.n_global, center=cfg.windows.global_center)
             score = m["px_median"] + 0.5 * m["global_t0_px_median"]
             if epoch > cfg.stage1_epochs and math.isfinite(m["success_auroc"]):
                 score += DETECT_SCORE_PX * (1.0 - m["success_auroc"])
@@ -168,8 +169,14 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             break
     model.load_state_dict(best_state)
     model = model.to(memory_format=torch.contiguous_format).eval()
+    from tcot_hybrid.data.dataset import camera_per_demo
+
+    cam_meta = camera_meta(camera)
+    if camera_per_demo(env):  # trained on several scenes' cameras: runs are checked on name and size only
+        cam_meta["per_scene"] = True
     meta = {
-        "robot": env["robot"], "camera": camera_meta(camera), "vocabulary": list(vocab.tokens),
+        "robot": env["robot"], "world": env.get("world", "workcell"), "height_ref": cfg.height_ref,
+        "camera": cam_meta, "vocabulary": list(vocab.tokens),
         "windows": dataclasses.asdict(cfg.windows), "direct_horizon": cfg.direct_horizon,
         "max_unknown_fraction": cfg.max_unknown_fraction,
         "data_hash": data_hash, "data_file": str(cfg.data), "extra_data": list(cfg.extra_data),

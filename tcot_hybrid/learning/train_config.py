@@ -111,6 +111,9 @@ class TrainConfig:
     heatmap_ce:      weight of a cross-entropy term pulling each heatmap toward a 1-cell Gaussian at its
                      label (a shape prior for soft-argmax; 0 = coordinate loss only).
     max_unknown_fraction: stored in the checkpoint; the planner refuses instructions with more unknown words.
+    height_ref:      what the lift cue z_m is measured from: "world" (world z; the workcell's table top is z = 0) or
+                     "camera" (the planner camera's height: LIBERO's tables stand at 0, 0.42 or 0.9 m, each scene
+                     with its own camera pose). Stored in the checkpoint; the planner lifts with it.
     model:           architecture knobs (vocab_size, dof, n_global, n_local, image_px are filled from the data).
     windows:         label windows (paper eq. 4/5).
     """
@@ -144,12 +147,14 @@ class TrainConfig:
     bf16: bool = True
     heatmap_ce: float = 0.5
     max_unknown_fraction: float = 0.5
+    height_ref: str = "world"
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     windows: TrajectoryWindowConfig = field(default_factory=TrajectoryWindowConfig)
 
     def __post_init__(self) -> None:
         require_choice("kind", self.kind, ("trajectory", "direct"))
+        require_choice("height_ref", self.height_ref, ("world", "camera"))
         for name in ("seed",):
             require_int(name, getattr(self, name), minimum=0)
         for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride",
