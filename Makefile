@@ -68,8 +68,14 @@ planner: setup
 	$(BIN)/tcot collect --suite long --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot collect --suite tool --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round6.yaml
-	# round 8, shipped: round 6 retrained on event-spaced global windows
+	# round 8: round 6 retrained on event-spaced global windows
 	$(BIN)/tcot train --config examples/configs/train_stage2_round8.yaml
+	# round 10, shipped: round 8's failure detector alone retrained on the strict success labels (issue 17),
+	# from oracle demonstrations and round 8's own GLSR episodes; every plan output stays round 8's
+	$(BIN)/tcot collect --episodes-per-task 10 --seed-start 450 --out data/demos_strict_panda.hdf5
+	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage2_round8.safetensors --mode glsr \
+		--perturb none,$(PERTURBS) --episodes-per-task 2 --seed-start 450 --out data/online_learned_glsr_strict.hdf5
+	$(BIN)/tcot train --config examples/configs/train_stage2_round10.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
 # The LIBERO oracle in the paper's protocol (docs/libero.md): all 50 shipped init states of the four suites'

@@ -47,6 +47,14 @@ def trajectory_loss(out: dict, b: dict, n_global: int, *, heatmap_ce: float = 0.
     return total.mean(), parts
 
 
+def detect_loss(out: dict, b: dict) -> tuple:
+    """Failure-detection loss alone (every sample a detect prompt; ``trainable: detect``)."""
+    import torch.nn.functional as F
+
+    l_det = F.binary_cross_entropy_with_logits(out["success_logit"], b["success"])
+    return l_det, {"detect": l_det}
+
+
 def direct_loss(out: dict, b: dict) -> tuple:
     import torch.nn.functional as F
 

@@ -64,6 +64,10 @@ class ModelConfig:
     rot_head:    also predict a TCP orientation per waypoint (``rot6``; LIBERO's tilted and turned grasps); heatmap
                  head only. False = top-down plans (the workcell).
     delta_scale_m: direct model: predicted delta is delta_scale_m * raw output [m].
+    detect_head: trajectory model: the success logit comes from its own head (pooled -> 128 -> 1) instead of
+                 the last output of the head it shares with the gripper bits. Nothing else reads that head or
+                 the detect prompt's mode embedding, so the detector can be fine-tuned alone (``tcot train``
+                 ``trainable: detect``) while every waypoint output stays bit-identical.
     """
 
     kind: str = "trajectory"
@@ -83,6 +87,7 @@ class ModelConfig:
     z_scale_m: float = 0.10
     delta_scale_m: float = 0.05
     rot_head: bool = False
+    detect_head: bool = False
 
     def __post_init__(self) -> None:
         require_choice("model.kind", self.kind, KINDS)
@@ -106,6 +111,11 @@ class ModelConfig:
 
             raise ConfigError(f"model.rot_head needs kind 'trajectory' and head 'heatmap', got kind {self.kind!r}, "
                               f"head {self.head!r}")
+        if self.detect_head and self.kind != "trajectory":
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"model.detect_head needs model.kind 'trajectory' (the direct model has no detector), "
+                              f"got kind {self.kind!r}")
 
     @property
     def n_waypoints(self) -> int:
@@ -221,6 +231,27 @@ class PlannerNet(nn.Module):
             side = cfg.image_px // 16
             self.fc = nn.Sequential(nn.Flatten(), nn.Linear(c3 * side * side, 256), nn.ReLU(), nn.Linear(256, 3 * n))
         self.pooled_head = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, n + 1))
+        if cfg.detect_head:
+            self.detect_head = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, 1))
+
+    def detect_parameters(self) -> list[tuple[str, nn.Parameter, int | None]]:
+        """(name, parameter, row) of every weight only the detect prompt reads: the detect head and the detect
+        mode's embedding row (``row``: only that row of the tensor; None: all of it). Training only these
+        leaves every global and local output unchanged."""
+        if not self.cfg.detect_head:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError("only a model with model.detect_head: true has weights the detector alone reads")
+        return [("modes.weight", self.modes.weight, MODE_IDS["detect"]),
+                *((f"detect_head.{k}", p, None) for k, p in self.detect_head.named_parameters())]
+
+    def init_detect_head(self) -> None:
+        """Copy the shared head's detection path into ``detect_head`` (same outputs as before it existed)."""
+        n = self.cfg.n_waypoints
+        with torch.no_grad():
+            self.detect_head[0].load_state_dict(self.pooled_head[0].state_dict())
+            self.detect_head[2].weight.copy_(self.pooled_head[2].weight[n:n + 1])
+            self.detect_head[2].bias.copy_(self.pooled_head[2].bias[n:n + 1])
 
     # ------------------------------------------------------------------------------------------------
     def condition(self, tokens: torch.Tensor, mode: torch.Tensor, proprio: torch.Tensor) -> torch.Tensor:
@@ -254,7 +285,8 @@ class PlannerNet(nn.Module):
             return {"delta_m": out[:, :3] * cfg.delta_scale_m, "grip_logit": out[:, 3:4]}
         n = cfg.n_waypoints
         pl = self.pooled_head(pooled).float()
-        res = {"grip_logit": pl[:, :n], "success_logit": pl[:, n]}
+        res = {"grip_logit": pl[:, :n],
+               "success_logit": self.detect_head(pooled).float()[:, 0] if cfg.detect_head else pl[:, n]}
         if not waypoints:
             return res
         if cfg.head == "heatmap":
