@@ -191,6 +191,7 @@ class EpisodeRunner:
         s.executor.reset_after_scene_reset()
         self._obs = None
         self.settle()
+        s.planner.prepare()
 
     def _step_once(self, step: int, *, may_plan: bool) -> None:
         s, ex = self.stack, self.stack.executor
@@ -274,6 +275,7 @@ class EpisodeRunner:
         for w in self.reach_warnings:
             s.executor.event("unreachable_target", **w)
         self.settle()
+        s.planner.prepare()
         step = 0
         try:
             while step < max_steps:

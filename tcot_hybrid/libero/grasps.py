@@ -24,6 +24,7 @@ import numpy as np
 from tcot_hybrid.libero.geometry import Boxes
 
 RIM_WORDS = ("bowl", "ramekin", "plate", "mug", "cup", "moka_pot", "pot", "pan", "frypan")
+ALIGN_SLACK_M = 0.006  # [m] top grasps close on at most this much more than the object's narrowest width
 MAX_SPAN_M = 0.072  # [m] widest slab the open hand closes on (8 cm between the pads, minus margin)
 FINGER_BELOW_TCP_M = 0.012  # [m] the finger meshes reach this far past the TCP (fingertip centre)
 APPROACH_DZ = 0.10  # [m] pre-grasp height above a grasp (vertical approach)
@@ -130,6 +131,27 @@ def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def candidate_yaws(obj: Boxes) -> np.ndarray:
+    """Hand yaws [rad, 0..pi) to try: every 15 degrees, plus the object's own face directions (the largest
+    boxes' horizontal axes): fingers 7 degrees off a book's faces turned it as they closed, and the turned
+    book no longer fitted the caddy's slot it had been aimed at."""
+    yaws = list(np.deg2rad(np.arange(0, 180, 15)))
+    if len(obj):
+        for i in np.argsort(-np.prod(obj.half, axis=1))[:3]:
+            for k in range(3):
+                a = obj.rot[i][:, k]
+                if abs(a[2]) < 0.3:
+                    for extra in (0.0, np.pi / 2):
+                        yaws.append((np.arctan2(a[1], a[0]) + extra) % np.pi)
+    yaws = np.array(yaws)
+    keep = [0]
+    for i in range(1, len(yaws)):  # drop near-duplicates (within 2 degrees, modulo pi)
+        d = np.abs((yaws[keep] - yaws[i] + np.pi / 2) % np.pi - np.pi / 2)
+        if d.min() > np.deg2rad(2.0):
+            keep.append(i)
+    return yaws[keep]
+
+
 def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     """(TCP position, rotation) per yaw (15-degree steps) whose top slab the open hand spans."""
     lo, hi = obj.aabb()
@@ -139,16 +161,69 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     in_slab = (obj.centre[:, 2] + ext[:, 2] >= hi[2] - depth) & (obj.centre[:, 2] - ext[:, 2] <= hi[2])
     slab = obj.select(in_slab)
     z = max(hi[2] - depth + 0.008, lo[2] + FINGER_BELOW_TCP_M + 0.004)
-    out = []
-    for yaw in np.deg2rad(np.arange(0, 180, 15)):
+    fits = []
+    for yaw in candidate_yaws(slab):
         R = rot_z(yaw)
         s_lo, s_hi = slab.extents_in(R, np.zeros(3))
         span = s_hi[1] - s_lo[1]
-        if span > MAX_SPAN_M:
-            continue
+        if span <= MAX_SPAN_M:
+            fits.append((span, R, s_lo, s_hi))
+    out = []
+    narrowest = min((f[0] for f in fits), default=0.0)
+    for span, R, s_lo, s_hi in fits:
+        if span > narrowest + ALIGN_SLACK_M:
+            continue  # fingers oblique to the faces turn the object as they close (a book, 16 degrees)
         mid = R @ ((s_lo + s_hi) / 2)
-        p = np.array([mid[0], mid[1], z])
-        out.append((p, top_down(R[:, 1])))
+        out.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1])))
+    return out
+
+
+PART_MAX_SPAN_M = 0.05  # [m] a part's strip leaves the open fingers room (a 7 cm strip across a moka pot's
+#                         body had the tilted fingers land on its lid)
+PART_PAD_M = 0.008  # [m] a pad's half width, less a margin
+PART_BAND_M = 0.015  # [m] half width of the strip a finger pair sweeps (pads 2.2 cm wide, plus margin)
+
+
+def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Top grasps of a narrow part of an object too wide to grasp whole (a moka pot's handle or spout):
+    per yaw whose whole top slab the hand cannot span, strips across the object 1 cm apart, each taken by
+    the boxes it crosses (down to the object's bottom: a handle reaches below the top slab); a strip the
+    open hand spans is a candidate, the TCP 2.2 cm below the strip's top."""
+    lo, hi = obj.aabb()
+    height = hi[2] - lo[2]
+    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    in_slab = obj.centre[:, 2] + ext[:, 2] >= hi[2] - min(0.03, 0.55 * height)
+    found = []
+    for yaw in candidate_yaws(obj):
+        R = rot_z(yaw)
+        s_lo, s_hi = obj.select(in_slab).extents_in(R, np.zeros(3))
+        if s_hi[1] - s_lo[1] <= MAX_SPAN_M:
+            continue  # the whole slab fits: top_candidates has it
+        local_c = obj.centre @ R
+        local_ext = np.einsum("nij,nj->ni", np.abs(np.einsum("ji,njk->nik", R, obj.rot)), obj.half)
+        b_lo, b_hi = local_c - local_ext, local_c + local_ext
+        for x in np.arange(s_lo[0], s_hi[0] + 1e-9, 0.01):
+            band = (b_hi[:, 0] >= x - PART_BAND_M) & (b_lo[:, 0] <= x + PART_BAND_M)
+            top = b_hi[band, 2].max() if band.any() else -np.inf
+            band &= b_hi[:, 2] >= top - 0.04  # what the fingers reach from the strip's top
+            if not band.any() or b_hi[band, 1].max() - b_lo[band, 1].min() > PART_MAX_SPAN_M:
+                continue
+            spans = []  # the pads need parallel faces under their whole width: a strip off a rounded edge
+            for xs in (x - PART_PAD_M, x, x + PART_PAD_M):  # narrows (or ends) under a pad and squeezes out
+                cut = band & (b_lo[:, 0] <= xs) & (b_hi[:, 0] >= xs)
+                spans.append(b_hi[cut, 1].max() - b_lo[cut, 1].min() if cut.any() else -1.0)
+            if min(spans) < 0 or max(spans) - min(spans) > 0.006:
+                continue
+            z = max(top - 0.022, lo[2] + FINGER_BELOW_TCP_M + 0.004)
+            mid = R @ np.array([x, (b_hi[band, 1].max() + b_lo[band, 1].min()) / 2, 0.0])
+            found.append((np.array([mid[0], mid[1], z]), top_down(R[:, 1]), float(np.mean(spans))))
+    # as for whole objects: fingers close on the part's faces, so of the strips over one spot (1.5 cm) only
+    # the narrowest ones stay
+    out = []
+    for p, R, span in found:
+        near = [f[2] for f in found if np.linalg.norm(f[0][:2] - p[:2]) < 0.015]
+        if span <= min(near) + ALIGN_SLACK_M:
+            out.append((p, R))
     return out
 
 

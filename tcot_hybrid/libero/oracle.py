@@ -21,7 +21,8 @@ import scipy.spatial.transform  # noqa: F401
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.libero.joints import MoveJoint
 from tcot_hybrid.libero.geometry import Boxes, subtree_bodies
-from tcot_hybrid.libero.skills import Destination, Effect, LiberoSkill, OracleContext, PickPlace
+from tcot_hybrid.libero.grasps import hand_points
+from tcot_hybrid.libero.skills import RELEASE_GAP_M, Destination, Effect, LiberoSkill, OracleContext, PickPlace
 
 SUPPORTED_PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 JOINT_PREDICATES = {"open": "is_open", "close": "is_close", "turnon": "turn_on", "turnoff": "turn_off"}
@@ -29,6 +30,7 @@ SLIDE_DEPTH_M = 0.008  # [m] a slide goal this far inside the predicate's interv
 SLIDE_PUSH_M = 0.03  # [m] the hand moves this much further (the joint limit stops the part; the pinch slips ~2 cm)
 HINGE_DEPTH_RAD = 0.35  # [rad] a hinge goal this far inside the predicate's interval
 HINGE_PUSH_RAD = 0.10  # [rad]
+ASIDE_MIN_REACH_M = 0.55  # [m] set-aside spots nearer the robot's base than this cost extra (see _aside_spot)
 TRAVEL_ABOVE_GROUND_M = 0.25  # [m] LiberoTask.travel_z above the lowest resting surface
 
 
@@ -119,7 +121,33 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
             if spot is not None and all(a.obj != place.obj for a in asides):
                 asides.append(PickPlace(ctx, place.obj, Destination(relation="aside", target=None, is_site=False,
                                                                     point=spot), ["aside", place.obj]))
+    # an object standing where the hand must go to grasp a goal object (a milk carton beside the cream cheese)
+    # is set aside first too
+    for place in places:
+        for blocker, keep_clear in _grasp_blockers(ctx, place):
+            if blocker in [p.obj for p in places] or any(a.obj == blocker for a in asides):
+                continue
+            spot = _aside_spot(ctx, blocker, None, keep_clear=keep_clear)
+            if spot is not None:
+                asides.append(PickPlace(ctx, blocker, Destination(relation="aside", target=None, is_site=False,
+                                                                  point=spot), ["aside", blocker]))
     return switches + asides + opens_needed + early_opens + places + late_opens + closes
+
+
+def _grasp_blockers(ctx: OracleContext, place: PickPlace) -> list[tuple[str, np.ndarray]]:
+    """Movable objects the hand hits at ``place``'s best grasp (or on its way down to it), when no grasp is
+    clean: (name, the hand's sample points, which the object's new spot must keep clear)."""
+    g = place.grasp(ctx.world, [])
+    if g.collisions == 0:
+        return []
+    pts = np.vstack([hand_points(g.pos - g.rot[:, 2] * dz, g.rot) for dz in (0.0, 0.03, 0.06, 0.10)])
+    out = []
+    for name in ctx.env.objects_dict:
+        if name == place.obj or name not in ctx.bodies:
+            continue
+        if ctx.object_boxes(name, []).contains(pts, margin=0.004).any():
+            out.append((name, pts))
+    return out
 
 
 def _in_the_way(ctx: OracleContext, obj: str, step: MoveJoint) -> bool:
@@ -133,20 +161,35 @@ def _in_the_way(ctx: OracleContext, obj: str, step: MoveJoint) -> bool:
     return PickPlace._boxes_hit(column, part, margin=0.02) or PickPlace._boxes_hit(part, column, margin=0.02)
 
 
-def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint) -> np.ndarray | None:
-    """A free spot for ``obj`` on its own support, clear of ``step``'s part at its goal and of everything else,
-    in the planner camera's view: the nearest of rings 10-25 cm around it."""
+def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint | None, *,
+                keep_clear: np.ndarray | None = None) -> np.ndarray | None:
+    """A free spot for ``obj`` on its own support, clear of ``step``'s part at its goal (if any), of the points
+    ``keep_clear`` (a blocked grasp's hand, 2 cm margin) and of everything else,
+    in the planner camera's view: on rings 10-25 cm around it, the nearest, with a spot closer than
+    ASIDE_MIN_REACH_M to the robot's base counted as further away (the arm folds to put a bowl down there, and
+    joint 6's 12 N m motor lagged into the tracking reflex: libero_goal open_the_top_drawer_and_put_the_bowl_inside,
+    sampled seed 2000)."""
     boxes = ctx.object_boxes(obj, [])
     origin = ctx.world.pos(obj)
     lo, hi = boxes.aabb()
-    obstacles = ctx.obstacles([Effect(joint=step.joint, q=step.q_push)], exclude=(obj,))
+    obstacles = ctx.obstacles([] if step is None else [Effect(joint=step.joint, q=step.q_push)], exclude=(obj,))
     ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
     tops = obstacles.centre[:, 2] + ext[:, 2]
+    # the hand puts it down the way it picks it up: its closed hand, shifted with the object, must fit there too
+    # (next to the cabinet the hand stopped 19 cm up and the bowl fell)
+    grasp = PickPlace(ctx, obj, Destination(relation="aside", target=None, is_site=False, point=origin), []).grasp(
+        ctx.world, [])
+    hand = hand_points(grasp.pos + np.array([0.0, 0.0, RELEASE_GAP_M]), grasp.rot, closed=True)
+    best = None
     for radius in (0.10, 0.15, 0.20, 0.25):
         for ang in np.deg2rad(np.arange(0, 360, 30)):
             d = radius * np.array([np.cos(ang), np.sin(ang), 0.0])
             moved = Boxes(boxes.centre + d + np.array([0, 0, 0.015]), boxes.rot, boxes.half, boxes.geom)
             if PickPlace._boxes_hit(moved, obstacles, margin=0.012):  # (lifted off its support for the test)
+                continue
+            if obstacles.contains(hand + d, margin=0.004).any():
+                continue
+            if keep_clear is not None and moved.contains(keep_clear, margin=0.02).any():
                 continue
             # the same support: whatever is under the new footprint tops out where the old support did
             under = obstacles.select((np.abs(obstacles.centre[:, 0] - (origin[0] + d[0])) <= ext[:, 0])
@@ -156,8 +199,11 @@ def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint) -> np.ndarray | N
                 continue
             spot = origin + d
             if ctx.in_view(spot) and ctx.in_view(spot + np.array([0, 0, hi[2] - lo[2] + 0.05])):
-                return spot
-    return None
+                reach = float(np.linalg.norm(spot[:2] - ctx.base_pos[:2]))
+                cost = radius + 2.0 * max(0.0, ASIDE_MIN_REACH_M - reach)
+                if best is None or cost < best[0] - 1e-9:
+                    best = (cost, spot)
+    return None if best is None else best[1]
 
 
 def _articulated_joints(ctx: OracleContext, name: str) -> list[int]:

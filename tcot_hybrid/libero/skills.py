@@ -26,6 +26,7 @@ from tcot_hybrid.libero.grasps import (
     rim_candidates,
     rot_z,
     score_grasps,
+    part_candidates,
     side_candidates,
     top_candidates,
 )
@@ -35,6 +36,12 @@ ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
 TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
 RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
+TRANSIT_RADIUS_M = 0.10  # [m] obstacles this close to the hand's straight way in count (the palm is 21 cm wide)
+TRANSIT_CLEARANCE_M = 0.05  # [m] the TCP this far above them on the way in
+GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves the planner camera's view
+SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is dragged out from under something
+SLIDE_MAX_M = 0.10  # [m] furthest such a drag
+SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
 
 
 def kf(p, closed: bool, rot=None) -> Keyframe:
@@ -270,13 +277,16 @@ class PickPlace(LiberoSkill):
         # fingers' clash with the object itself (below) sorts out which rim is a real, open rim
         rims = rim_candidates(obj) if kind == "rim" else []
         tops = top_candidates(obj)
-        cands = rims + tops
+        parts = part_candidates(obj) if not tops else []
+        cands = rims + tops + parts
         if not cands:
             raise PlanningError(f"oracle: no grasp for {self.obj!r} (category {ctx.category.get(self.obj)!r}): "
                                 f"no rim and no top slab narrower than the open hand")
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
-        cands = cands + tilted(cands, ctx.base_pos) + side_candidates(obj, ctx.base_pos)
+        parts = parts + tilted(parts, ctx.base_pos)
+        cands = rims + tops + tilted(rims + tops, ctx.base_pos) + parts + side_candidates(obj, ctx.base_pos)
         bottom = float(obj.aabb()[0][2])
+        centre_xy = obj.centre[:, :2].mean(axis=0) if len(obj) else np.zeros(2)
 
         def prefer(pos, rot):
             # nearer the robot is easier; far and low grasps want the hand tilted away from the robot
@@ -290,6 +300,7 @@ class PickPlace(LiberoSkill):
 
         n_rim = len(rims)
         rim_ids = {id(c[1]) for c in rims}
+        part_ids = {id(c[1]) for c in parts}
 
         def prefer_all(pos, rot):
             cost = prefer(pos, rot)
@@ -297,6 +308,8 @@ class PickPlace(LiberoSkill):
                 cost += 5.0  # plans live in the planner camera's pixels: a grasp it cannot see is refused
             # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
             near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
+            if id(rot) in part_ids:  # a part's strip lies between the open fingers: nothing may be under them
+                near[:] = True
             own = obj.select(near).contains(hand_points(pos, rot, fingers_only=True), margin=-0.002)
             cost += float(own.sum())
             # a tall object held near its top hangs its whole height below the hand: the carry then goes
@@ -304,10 +317,12 @@ class PickPlace(LiberoSkill):
             cost += 5.0 * max(0.0, float(pos[2] - bottom) - 0.08)
             if kind == "rim" and not rim_ids.__contains__(id(rot)) and n_rim:
                 cost += 0.5  # a top grasp on a rim-family object only when no rim pinch is clean
+            if parts:  # a part far from the object's middle tilts it in the fingers
+                cost += 5.0 * float(np.linalg.norm(pos[:2] - centre_xy))
             return cost
 
         graded = score_grasps(cands, obstacles, ground_z=ctx.ground_z(), kind=kind, prefer=prefer_all)
-        self.last_grasps = graded  # for inspection
+        self.last_grasps = graded  # for inspection, and for _plan_now's fallbacks
         return graded[0]
 
     def _plan(self, world: World) -> dict:
@@ -328,10 +343,20 @@ class PickPlace(LiberoSkill):
         obj_pos = world.pos(self.obj) if not effects else ctx.point_after(
             world.pos(self.obj), int(ctx.bodies[self.obj][0]), effects)
         if held:
-            g_pos, g_rot = world.tcp_pos(), world.tcp_rot()
-        else:
-            g = self.grasp(world, effects)
-            g_pos, g_rot = g.pos, g.rot
+            return self._plan_with(world, effects, held, obj_pos, world.tcp_pos(), world.tcp_rot())
+        best = self.grasp(world, effects)
+        # plans live in the planner camera's pixels: a grasp whose lift or carry leaves the view (a wine bottle
+        # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view
+        first = None
+        for g in [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]:
+            out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
+            if not out["hidden"]:
+                return out
+            first = first or out
+        return first
+
+    def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
+        ctx = self.ctx
         obj_boxes = ctx.object_boxes(self.obj, effects)
         # the object in the hand's frame (rigid while held)
         rel_c = (obj_boxes.centre - g_pos) @ g_rot
@@ -375,9 +400,50 @@ class PickPlace(LiberoSkill):
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
         out = best[1]
-        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles,
-                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin)
+        slide = None if held else self._slide_out(g_pos, g_rot, rel_c, rel_R, obj_boxes, obstacles)
+        lift_from = slide if slide is not None else start
+        held_boxes = Boxes(rel_c @ g_rot.T, np.einsum("ij,njk->nik", g_rot, rel_R), obj_boxes.half, obj_boxes.geom)
+        below = float(-held_boxes.aabb()[0][2])  # how far the object hangs under the TCP, held as grasped
+        lift_floor = max(ctx.clear_z(lift_from, lift_from, obstacles, radius=0.08) + 0.02 + below, lift_from[2] + 0.03)
+        lift = ctx.into_view([lift_from[0], lift_from[1], best[1]["carry_z"]], lift_floor)
+        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles, slide=slide,
+                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
+                   hidden=bool(best[0][0]) or not ctx.in_view(lift))
         return out
+
+    def _slide_out(self, g_pos, g_rot, rel_c, rel_R, obj_boxes: Boxes, obstacles: Boxes) -> np.ndarray | None:
+        """Where to drag the grasped object (TCP position, raised SLIDE_RAISE_M) before lifting it, when a
+        straight lift would hit something above it (a bowl at the back of a drawer, half under the cabinet's
+        top panel): the shortest horizontal move, within SLIDE_MAX_M, along which the object and the closed
+        hand stay clear and from whose end the lift is clear. None when the straight lift is clear (or no
+        move frees it: the lift is then tried as it is)."""
+        def carried(tcp) -> Boxes:
+            return Boxes(tcp + rel_c @ g_rot.T, np.einsum("ij,njk->nik", g_rot, rel_R), obj_boxes.half,
+                         obj_boxes.geom)
+
+        lo, hi = obj_boxes.aabb()
+        near = _near(obstacles, lo - 0.25, hi + 0.25)
+
+        def clear(tcp) -> bool:
+            return not (self._boxes_hit(carried(tcp), near)
+                        or near.contains(hand_points(tcp, g_rot, closed=True), margin=0.002).any())
+
+        raised = g_pos + np.array([0.0, 0.0, SLIDE_RAISE_M])
+
+        def lift_clear(base) -> bool:
+            return all(clear(base + np.array([0.0, 0.0, dz])) for dz in np.arange(0.01, SLIDE_LIFT_CHECK_M + 1e-9,
+                                                                                  0.01))
+
+        if lift_clear(raised):
+            return None
+        for dist in np.arange(0.01, SLIDE_MAX_M + 1e-9, 0.01):
+            for ang in np.deg2rad(np.arange(0.0, 360.0, 22.5)):
+                d = np.array([np.cos(ang), np.sin(ang), 0.0])
+                end = raised + d * dist
+                path = [raised + d * s for s in np.arange(0.005, dist + 1e-9, 0.005)]
+                if lift_clear(end) and all(clear(q) for q in path):
+                    return end
+        return None
 
     @staticmethod
     def _boxes_hit(body: Boxes, obstacles: Boxes, margin: float = 0.002) -> bool:
@@ -486,11 +552,15 @@ class PickPlace(LiberoSkill):
             kfs += [kf(pre, False, g_rot), kf(g_pos + back * 0.02, False, g_rot), kf(g_pos, False, g_rot),
                     kf(g_pos, True, g_rot)]
         start = world.tcp_pos() if p["held"] else g_pos
+        if p["slide"] is not None:  # drag it out from under an overhang first
+            kfs += [kf(g_pos + np.array([0.0, 0.0, SLIDE_RAISE_M]), True, g_rot), kf(p["slide"], True, g_rot)]
+            start = p["slide"]
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
         # the lift only has to clear what is near the start (the carry then climbs towards the destination)
-        local = ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"]
-        lift = ctx.into_view([start[0], start[1], carry_z], max(local, start[2] + 0.03))
+        lift = p["lift"] if not p["held"] else ctx.into_view(
+            [start[0], start[1], carry_z],
+            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2] + 0.03))
         over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
         kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
                 kf(over, True, R_place),
@@ -501,6 +571,16 @@ class PickPlace(LiberoSkill):
         kfs.append(kf(up, False, R_place))
         if not p["held"]:
             kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
+            # the way in: when the straight way from home (or from where the hand is) would hit something, the
+            # hand comes in above it (a drawer the previous step pulled out stopped the hand on its way to a
+            # bowl behind it)
+            start = ctx.home_tcp if ctx.effects_before(self, world) else world.tcp_pos()
+            pre = kfs[0].pos
+            z_safe = ctx.clear_z(start, pre, obstacles, radius=TRANSIT_RADIUS_M) + TRANSIT_CLEARANCE_M
+            n = max(2, int(np.linalg.norm(pre - start) / 0.02))
+            path = np.vstack([hand_points(start + (pre - start) * f, g_rot) for f in np.linspace(0.2, 1.0, n)])
+            if pre[2] < z_safe and obstacles.contains(path, margin=0.0).any():
+                kfs.insert(0, kf(ctx.into_view([pre[0], pre[1], z_safe], pre[2]), False, g_rot))
         return kfs
 
 

@@ -43,6 +43,10 @@ class Planner(ABC):
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         """A global (whole task) or local (short horizon from now) plan."""
 
+    def prepare(self) -> None:
+        """Work done once the scene has settled and before the first planner call, outside the plan latency
+        budget (``max_plan_latency_s`` times planner calls, not episode set-up). Default: nothing."""
+
     def success_probability(self, obs: Observation) -> float:
         """p(task successful) for failure detection; planners without a detector cannot run GLSR."""
         from tcot_hybrid.errors import PlanningError

@@ -129,6 +129,11 @@ class OraclePlanner(Planner):
                                            rot_spacing=cfg.rot_spacing_rad)
         return points, grip, (rots if posed else None)
 
+    def prepare(self) -> None:
+        """Compose the script and its grasps for the settled scene (LIBERO's take ~0.6 s, and the first call
+        is timed: under load it went stale): the first plan at this instant reuses them."""
+        self.path_posed()
+
     def success_probability(self, obs: Observation) -> float:
         """Privileged: the simulator's own success predicate (the detector's upper bound)."""
         return 1.0 if self.task.success(self.world) else 0.0

@@ -1,0 +1,43 @@
+"""The LIBERO oracle's grasp geometry on synthetic collision boxes (no LIBERO scene needed)."""
+import numpy as np
+
+from tcot_hybrid.libero.geometry import Boxes
+from tcot_hybrid.libero.grasps import MAX_SPAN_M, part_candidates, rot_z, top_candidates
+
+
+def boxes(*specs) -> Boxes:
+    """Boxes from (centre, half size, yaw [rad]) triples."""
+    centre = np.array([s[0] for s in specs], float)
+    half = np.array([s[1] for s in specs], float)
+    rot = np.stack([rot_z(s[2]) for s in specs])
+    return Boxes(centre, rot, half, np.arange(len(specs)))
+
+
+def test_top_grasps_close_on_a_books_faces_not_across_them():
+    yaw = np.deg2rad(58.8)  # a standing book turned off the 15-degree grid of candidate yaws
+    book = boxes(([0.0, 0.0, 0.067], [0.014, 0.055, 0.067], yaw))
+    thin_axis = rot_z(yaw)[:, 0]
+    cands = top_candidates(book)
+    assert cands
+    for _, rot in cands:
+        assert abs(rot[:, 1] @ thin_axis) > np.cos(np.deg2rad(3.0)), rot[:, 1]
+
+
+def test_part_grasps_take_a_handle_of_an_object_too_wide_to_grasp_whole():
+    body = ([0.0, 0.0, 0.065], [0.041, 0.041, 0.065], 0.0)  # 8.2 cm across: wider than the open hand
+    handle = ([0.0, 0.062, 0.08], [0.0065, 0.02, 0.035], 0.0)  # 1.3 cm thick, off the +y side
+    pot = boxes(body, handle)
+    assert top_candidates(pot) == []
+    cands = part_candidates(pot)
+    on_handle = [(p, R) for p, R in cands if abs(p[0]) < 0.01 and 0.045 < p[1] < 0.08]
+    assert on_handle, [p.round(3) for p, _ in cands]
+    for p, R in on_handle:
+        assert abs(R[:, 1] @ np.array([1.0, 0.0, 0.0])) > 0.99  # the fingers close across its thin side
+        assert p[2] < 0.115  # below the handle's top, where the pads hold it
+
+
+def test_a_plain_box_too_wide_for_the_hand_has_no_part_to_grasp():
+    wide = boxes(([0.0, 0.0, 0.05], [0.05, 0.05, 0.05], 0.0))
+    assert 2 * 0.05 > MAX_SPAN_M
+    assert top_candidates(wide) == []
+    assert part_candidates(wide) == []
