@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup libero demo test bench planner libero-oracle-eval clean
+.PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -68,8 +68,14 @@ planner: setup
 	$(BIN)/tcot collect --suite long --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot collect --suite tool --episodes-per-task 250 --seed-start 750 --out data/demos_extra_panda.hdf5
 	$(BIN)/tcot train --config examples/configs/train_stage2_round6.yaml
-	# round 8, shipped: round 6 retrained on event-spaced global windows
+	# round 8: round 6 retrained on event-spaced global windows
 	$(BIN)/tcot train --config examples/configs/train_stage2_round8.yaml
+	# round 10, shipped: round 8's failure detector alone retrained on the strict success labels (issue 17),
+	# from oracle demonstrations and round 8's own GLSR episodes; every plan output stays round 8's
+	$(BIN)/tcot collect --episodes-per-task 10 --seed-start 450 --out data/demos_strict_panda.hdf5
+	$(BIN)/tcot collect --planner learned --checkpoint runs/train/stage2_round8.safetensors --mode glsr \
+		--perturb none,$(PERTURBS) --episodes-per-task 2 --seed-start 450 --out data/online_learned_glsr_strict.hdf5
+	$(BIN)/tcot train --config examples/configs/train_stage2_round10.yaml
 	$(BIN)/tcot train --kind direct --out runs/train/direct.safetensors --max-minutes 30
 
 # The LIBERO oracle in the paper's protocol (docs/libero.md): all 50 shipped init states of the four suites'
@@ -85,6 +91,32 @@ libero-oracle-eval: setup
 		--controllers computed_torque,joint_pd,osc,mpc --iks mink,pinocchio --workers 2 \
 		--out docs/eval-libero/controllers-ik
 	$(BIN)/python docs/eval-libero/summarize.py
+
+# The shipped LIBERO planner from nothing (docs/libero-planner.md): oracle demonstrations of the four suites' 40 tasks
+# on sampled layouts, training seeds 0.. (docs/seeds.md; never the shipped init states, the test set), a planner
+# image every 3rd planner step (LIBERO frames cost 28-80 ms), then one training run; the checkpoint is copied to
+# tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks on LIBERO tasks. The issue asks
+# for 50 demonstrations per task; LIBERO_PLANNER_EPISODES sets how many (the shipped one: see docs/libero-planner.md).
+LIBERO_PLANNER_EPISODES ?= 10
+libero-planner: setup
+	mkdir -p docs/libero-planner runs/libero
+	$(BIN)/tcot collect --suite $(LIBERO_SUITES) --episodes-per-task $(LIBERO_PLANNER_EPISODES) --seed-start 0 \
+		--image-every 3 --workers 2 --quiet --out data/demos_libero_panda.hdf5 > docs/libero-planner/collect.log 2>&1 \
+		|| (tail -5 docs/libero-planner/collect.log; exit 1)
+	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \
+		|| (tail -5 runs/libero/train.log; exit 1)
+	grep -v "it/s\|s/it\|step/s" runs/libero/train.log > docs/libero-planner/train.log
+	cp runs/libero/planner.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
+	cp runs/libero/planner.json tcot_hybrid/checkpoints/libero_panda_default.json
+	cp runs/libero/planner.metrics.jsonl docs/libero-planner/train.metrics.jsonl
+	$(BIN)/python docs/libero-planner/summarize.py
+
+# The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md
+# names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR.
+libero-planner-eval: setup
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --init shipped --episodes 2 \
+		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped
+	$(BIN)/python docs/libero-planner/summarize.py
 
 clean:
 	rm -rf runs .pytest_cache

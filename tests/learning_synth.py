@@ -50,11 +50,15 @@ def _frame(uv_obj, uv_grip, closed, rng, px=PX) -> np.ndarray:
 
 
 def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, robot: str = "panda",
-                   instructions=("put the cube on the plate", "open the drawer"), episode=None) -> None:
+                   instructions=("put the cube on the plate", "open the drawer"), episode=None,
+                   camera_for=None, quat_for=None) -> None:
     """Write a synthetic tcot-demos-v1 file with one demo per seed (seed % 10 == 0 → valid split).
 
     ``episode(seed) -> dict`` overrides demo attributes (e.g. an online rollout: source, planner, success,
-    perturb, perturb_step, recover_step); an unsuccessful episode never has its success predicate hold."""
+    perturb, perturb_step, recover_step); an unsuccessful episode never has its success predicate hold.
+    ``camera_for(seed) -> (CameraModel, support_z)`` gives every demo its own camera (a LIBERO-style file,
+    env_args camera_per_demo) and table height (the track is lifted by it); ``quat_for(seed) -> (4,)`` its TCP
+    orientation (w, x, y, z; default top-down)."""
     with h5py.File(path, "w") as h5:
         h5.attrs["format"] = FORMAT
         h5.attrs["tcot_version"] = "test"
@@ -62,12 +66,13 @@ def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, r
         data.attrs["total"] = 0
         for seed in seeds:
             rng = np.random.default_rng(seed)
-            start = np.array([0.45, 0.0, 0.35])
-            goal = np.array([rng.uniform(0.35, 0.6), rng.uniform(-0.2, 0.2), 0.02])
+            cam, support_z = camera_for(seed) if camera_for else (camera, 0.0)
+            start = np.array([0.45, 0.0, 0.35 + support_z])
+            goal = np.array([rng.uniform(0.35, 0.6), rng.uniform(-0.2, 0.2), 0.02 + support_z])
             s = np.clip(np.arange(T) / (T - 8), 0, 1)[:, None]
             pos = (start + (goal - start) * s).astype(np.float32)
-            uv, depth = camera.project(pos.astype(float))
-            uv_obj, _ = camera.project(goal[None])
+            uv, depth = cam.project(pos.astype(float))
+            uv_obj, _ = cam.project(goal[None])
             closed = (np.arange(T) >= T - 6).astype(np.uint8)
             succ = (np.arange(T) >= T - 3).astype(np.uint8)
             imgs = np.stack([_frame(uv_obj[0], uv[t], closed[t], rng) for t in range(T)])
@@ -79,7 +84,7 @@ def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, r
             arrays = {
                 "obs/agentview_image": imgs, "obs/robot0_joint_pos": q,
                 "obs/robot0_joint_vel": np.zeros((T, DOF), np.float32), "obs/robot0_eef_pos": pos,
-                "obs/robot0_eef_quat": np.tile(np.float32([0, 1, 0, 0]), (T, 1)),
+                "obs/robot0_eef_quat": np.tile(np.float32(quat_for(seed) if quat_for else [0, 1, 0, 0]), (T, 1)),
                 "obs/robot0_gripper_qpos": np.zeros((T, 2), np.float32), "obs/robot0_gripper_closed": closed,
                 "obs/eef_uv_px": uv.astype(np.float32), "obs/eef_depth_m": depth.astype(np.float32),
                 "task_success": succ, "actions": actions,
@@ -90,6 +95,9 @@ def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, r
                      "perturb_step": -1, "recover_step": -1, "source": "demo", "success": True, "t_success": T - 3,
                      "num_samples": T}
             attrs.update(episode(seed) if episode else {})
+            if camera_for:
+                attrs.update(K=np.asarray(cam.K, float), T_world_cam=np.asarray(cam.T_world_cam, float),
+                             support_z=float(support_z))
             if not attrs["success"]:
                 arrays["task_success"] = np.zeros(T, np.uint8)
                 attrs["t_success"] = -1
@@ -97,6 +105,7 @@ def make_demo_file(path, camera: CameraModel, *, seeds=range(12), T: int = 24, r
         env = {"robot": robot, "camera": camera.name, "K": camera.K.tolist(),
                "T_world_cam": camera.T_world_cam.tolist(), "width": camera.width, "height": camera.height,
                "near_m": camera.near_m, "far_m": camera.far_m, "sim_dt": 0.002, "ctrl_dt": 0.01, "plan_dt": 0.1,
-               "config_hash": "synthetic"}
+               "config_hash": "synthetic", "camera_per_demo": camera_for is not None,
+               "world": "libero" if camera_for else "workcell"}
         data.attrs["env_args"] = json.dumps(env)
         write_masks(h5)

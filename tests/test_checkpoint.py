@@ -265,3 +265,66 @@ def test_nonexistent_file(tmp_path):
     with pytest.raises(CheckpointError, match="does not exist"):
         load_checkpoint(tmp_path / "nope.safetensors")
     assert not os.path.exists(tmp_path / "nope.safetensors")
+
+
+def test_checkpoint_records_its_world_and_is_refused_in_another(tmp_path, camera):
+    """A LIBERO checkpoint is refused on a workcell task and the other way round, before the robot is compared,
+    with a message naming both worlds; checkpoints saved before the field existed are workcell ones."""
+    lib = tmp_path / "libero.safetensors"
+    save_checkpoint(lib, _model(), {**_meta(camera), "world": "libero"})
+    assert json.loads(meta_path(lib).read_text())["world"] == "libero"
+    load_checkpoint(lib, world="libero")
+    with pytest.raises(CheckpointError, match="trained in the 'libero' world.*task is in the 'workcell' world"):
+        load_checkpoint(lib, robot="panda", camera=camera, world="workcell")
+    old = tmp_path / "old.safetensors"
+    save_checkpoint(old, _model(), _meta(camera))  # no "world": the workcell
+    load_checkpoint(old, world="workcell")
+    with pytest.raises(CheckpointError, match="'workcell' world.*'libero' world.*worlds: workcell, libero"):
+        load_checkpoint(old, world="libero")
+    _rewrite(old, blob=old.read_bytes(), meta_update={"world": "mars"})
+    with pytest.raises(CheckpointError, match="world must be one of workcell, libero"):
+        load_checkpoint(old)
+    _rewrite(old, blob=old.read_bytes(), meta_update={"world": "workcell", "height_ref": "sky"})
+    with pytest.raises(CheckpointError, match="height_ref must be one of world, camera"):
+        load_checkpoint(old)
+
+
+def test_per_scene_camera_checkpoint_accepts_other_poses_but_not_other_cameras(tmp_path, camera):
+    """Trained on several scenes' camera poses (LIBERO's agentview takes four), a checkpoint is checked on the
+    camera's name and image size only; a per-file one still needs the exact pose."""
+    path = tmp_path / "scenes.safetensors"
+    cam = {**camera_meta(camera), "per_scene": True}
+    save_checkpoint(path, _model(), {**_meta(camera), "camera": cam, "world": "libero"})
+    moved = np.array(camera.T_world_cam)
+    moved[:3, 3] += (0.3, 0.0, -0.9)
+    other = CameraModel(name=camera.name, width=128, height=128, K=camera.K, T_world_cam=moved,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    load_checkpoint(path, camera=other)
+    small = CameraModel(name=camera.name, width=96, height=96, K=camera.K, T_world_cam=moved,
+                        near_m=camera.near_m, far_m=camera.far_m)
+    with pytest.raises(CheckpointError, match="128x128 px.*96x96"):
+        load_checkpoint(path, camera=small)
+    _rewrite(path, blob=path.read_bytes(), meta_update={"camera": {**cam, "per_scene": "yes"}})
+    with pytest.raises(CheckpointError, match="camera.per_scene must be true or false"):
+        load_checkpoint(path)
+
+
+def test_libero_robot_without_a_shipped_checkpoint_points_to_make_libero_planner(tmp_path, monkeypatch):
+    import tcot_hybrid.learning.checkpoint as ck
+
+    monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
+    with pytest.raises(CheckpointError, match="libero_panda.*make libero-planner"):
+        default_checkpoint("libero_panda")
+
+
+def test_shipped_libero_checkpoint_is_small_and_made_for_libero():
+    """`--planner learned` on a LIBERO task loads the libero_panda default: a LIBERO checkpoint (world, per-scene
+    camera, heights from the camera, a rotation head) for the bundled libero_panda's model, under 10 MB."""
+    from tcot_hybrid.robot import load_robot_spec
+
+    path = default_checkpoint("libero_panda")
+    assert path.stat().st_size < 10e6
+    ck = load_checkpoint(path, robot_spec=load_robot_spec("libero_panda"), kind="trajectory", world="libero")
+    assert ck.meta["camera"]["per_scene"] and ck.meta["height_ref"] == "camera" and ck.model.cfg.rot_head
+    with pytest.raises(CheckpointError, match="'libero' world"):
+        load_checkpoint(path, world="workcell")

@@ -127,3 +127,45 @@ def test_vocabulary():
         v.encode_checked("open the drawer", 2, max_unknown_fraction=0.5)
     with pytest.raises(ValueError):
         Vocabulary(("a", "b"))
+
+
+def test_rotation_head_outputs_and_readouts_agree():
+    """rot_head adds a 6D orientation per waypoint, read out with the heatmap's softmax like the height; the
+    windowed read-out equals the full one when the window covers the map; the workcell's model has no such
+    output and keeps its tensor names (old checkpoints load)."""
+    m = PlannerNet(ModelConfig(vocab_size=10, width=8, rot_head=True)).eval()
+    with torch.inference_mode():
+        o = m(*_inputs())
+    assert o["rot6"].shape == (3, 60, 6) and torch.isfinite(o["rot6"]).all()
+    assert m.maps.out_channels == 8 * 60
+    wide = PlannerNet(ModelConfig(vocab_size=10, width=8, rot_head=True, readout_radius_cells=40)).eval()
+    wide.load_state_dict(m.state_dict())
+    with torch.inference_mode():
+        w = wide(*_inputs())
+    torch.testing.assert_close(w["rot6"], o["rot6"], atol=1e-4, rtol=1e-4)
+    torch.testing.assert_close(w["z_m"], o["z_m"], atol=1e-4, rtol=1e-4)
+    plain = PlannerNet(ModelConfig(vocab_size=10, width=8)).eval()
+    with torch.inference_mode():
+        assert "rot6" not in plain(*_inputs())
+    assert plain.maps.out_channels == 2 * 60
+    with pytest.raises(ConfigError, match="rot_head needs kind 'trajectory' and head 'heatmap'"):
+        ModelConfig(rot_head=True, head="fc")
+    with pytest.raises(ConfigError, match="rot_head"):
+        ModelConfig(rot_head=True, kind="direct")
+
+
+def test_rot6_round_trip_and_gram_schmidt():
+    from scipy.spatial.transform import Rotation
+
+    from tcot_hybrid.learning.model import matrix_to_rot6, rot6_to_matrix
+
+    R = Rotation.random(20, random_state=3).as_matrix()
+    np.testing.assert_allclose(rot6_to_matrix(matrix_to_rot6(R)), R, atol=1e-12)
+    noisy = matrix_to_rot6(R) * 1.7 + np.random.default_rng(0).normal(0, 0.05, (20, 6))
+    Rn = rot6_to_matrix(noisy)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", Rn, Rn), np.broadcast_to(np.eye(3), (20, 3, 3)), atol=1e-12)
+    assert (np.linalg.det(Rn) > 0.999).all()
+    with pytest.raises(ValueError, match="parallel"):
+        rot6_to_matrix(np.array([1.0, 0, 0, 2.0, 0, 0]))
+    with pytest.raises(ValueError, match="not finite"):
+        rot6_to_matrix(np.array([np.nan, 0, 0, 0, 1, 0]))

@@ -342,3 +342,49 @@ def test_learned_planner_config_validated():
         LearnedPlannerConfig(dwell_step_m=-0.01)
     with pytest.raises(ConfigError, match="min_height_m"):
         LearnedPlannerConfig(min_height_m=float("nan"))
+
+
+def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_path, camera, monkeypatch):
+    """A LIBERO-style checkpoint (rot_head, height_ref camera): the plan's z is the network's height plus the
+    camera's, and tcp_rot is the camera-frame 6D output turned into the world with the camera's calibration."""
+    from scipy.spatial.transform import Rotation
+
+    from tcot_hybrid.learning.model import matrix_to_rot6
+
+    torch.manual_seed(0)
+    model = PlannerNet(ModelConfig(width=8, vocab_size=len(VOCAB), rot_head=True, z_offset_m=-0.5)).eval()
+    meta = {"robot": "panda", "camera": {**camera_meta(camera), "per_scene": True}, "world": "libero",
+            "height_ref": "camera", "vocabulary": list(VOCAB.tokens),
+            "windows": {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}, "data_hash": "t", "metrics": {},
+            "versions": versions(), "max_unknown_fraction": 0.5, "direct_horizon": 3}
+    path = save_checkpoint(tmp_path / "lib.safetensors", model, meta)
+    p = LearnedPlanner(load_checkpoint(path, camera=camera, world="libero"), camera)
+    R_cam = Rotation.random(60, random_state=1).as_matrix()
+    cam_z = float(camera.T_world_cam[2, 3])
+    real = p.model.forward
+
+    def fixed(*a, **k):
+        out = real(*a, **k)
+        if "uv_px" in out:
+            out["z_m"] = torch.full_like(out["z_m"], 0.3 - cam_z)  # 0.3 m in the world
+            out["rot6"] = torch.from_numpy(matrix_to_rot6(R_cam) * 2.0)[None].float()  # unnormalised columns
+        return out
+    monkeypatch.setattr(p.model, "forward", fixed)
+    g = p.plan(_obs(), mode="global")
+    np.testing.assert_allclose(camera.unproject(g.uv_px, g.depth_m)[:, 2], 0.3, atol=1e-5)
+    np.testing.assert_allclose(g.tcp_rot, camera.T_world_cam[:3, :3] @ R_cam[25:51], atol=1e-5)
+    loc = p.plan(_obs(), mode="local")
+    np.testing.assert_allclose(loc.tcp_rot, camera.T_world_cam[:3, :3] @ R_cam[51:], atol=1e-5)
+
+    def degenerate(*a, **k):
+        out = fixed(*a, **k)
+        if "rot6" in out:
+            out["rot6"] = torch.zeros_like(out["rot6"])
+        return out
+    monkeypatch.setattr(p.model, "forward", degenerate)
+    with pytest.raises(PlanningError, match="orientation output cannot be made a rotation"):
+        p.plan(_obs(), mode="global")
+
+
+def test_workcell_plans_stay_top_down(planner):
+    assert planner.plan(_obs(), mode="global").tcp_rot is None

@@ -18,7 +18,7 @@ from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.learning.checkpoint import load_checkpoint  # noqa: E402
 from tcot_hybrid.learning.data import instructions_of, load_frames  # noqa: E402
 from tcot_hybrid.data.labels import TrajectoryWindowConfig, windows_from_meta  # noqa: E402
-from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
+from tcot_hybrid.learning.model import ModelConfig, PlannerNet  # noqa: E402
 from tcot_hybrid.camera import points_at_height  # noqa: E402
 from tcot_hybrid.learning.batches import Batcher, steps_to_success  # noqa: E402
 from tcot_hybrid.learning.train import train  # noqa: E402
@@ -183,11 +183,16 @@ def test_example_train_configs_load_and_chain():
     round8 = load_train_config(root / "train_stage2_round8.yaml")  # same data, event-spaced global windows
     assert round8.init == round6.out and round8.extra_data == round6.extra_data
     assert set(round8.online_data) == set(round6.online_data) and round8.windows.global_spacing == "events"
+    # round 10: the detector alone, from round 8, on new strict-labelled data; same label windows as round 8
+    round10 = load_train_config(root / "train_stage2_round10.yaml")
+    assert round10.init == round8.out and round10.trainable == "detect" and round10.model.detect_head
+    assert round10.windows == round8.windows and round10.model.readout_radius_cells == round8.model.readout_radius_cells
     # the shipped checkpoint is the last round's output, with that round's config
     shipped = json.loads((root.parent.parent / "tcot_hybrid" / "checkpoints" / "panda_default.json").read_text())
-    assert shipped["train_config"]["out"] == round8.out
-    assert shipped["model"]["readout_radius_cells"] == round8.model.readout_radius_cells
-    assert windows_from_meta(shipped["windows"]) == round8.windows
+    assert shipped["train_config"]["out"] == round10.out
+    assert shipped["model"]["readout_radius_cells"] == round10.model.readout_radius_cells
+    assert shipped["model"]["detect_head"] is True
+    assert windows_from_meta(shipped["windows"]) == round10.windows
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):
@@ -289,3 +294,56 @@ def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, e
     with pytest.raises(ConfigError, match="init checkpoint .* has model"):
         train(_cfg(demo_file, tmp_path / "s3.safetensors", max_epochs=1, init=str(first.checkpoint),
                    model=ModelConfig(width=16)), progress=False, log=lambda *_: None)
+
+
+def test_detect_only_finetune_leaves_every_plan_output_bit_identical(demo_file, online_file, tmp_path, camera):
+    """``trainable: detect`` on a shared-head checkpoint: the new detect head starts as the old detector, training
+    changes the detector's outputs, and every global/local output (waypoints, heights, gripper bits) stays the
+    same bit for bit."""
+    first = train(_cfg(demo_file, tmp_path / "s1.safetensors", max_epochs=2, stage1_epochs=1),
+                  progress=False, log=lambda *_: None)
+    before = load_checkpoint(first.checkpoint).model.eval()
+    model_cfg = ModelConfig(width=8, detect_head=True)
+    cfg = _cfg(demo_file, tmp_path / "det.safetensors", max_epochs=2, stage1_epochs=0, init=str(first.checkpoint),
+               online_data=(str(online_file),), epoch_samples=64, lr=1e-2, trainable="detect", model=model_cfg,
+               mix_stage2=MixConfig(global_frac=0.0, local_frac=0.0, detect_frac=1.0))
+    logs = []
+    res = train(cfg, progress=False, log=logs.append)
+    assert any("detect head copied from its shared head" in line for line in logs)
+    assert any(line.startswith("trainable: detect") for line in logs)
+    after = load_checkpoint(res.checkpoint, robot="panda", camera=camera).model.eval()
+    assert after.cfg.detect_head and not before.cfg.detect_head
+    g = torch.Generator().manual_seed(0)
+    img = torch.rand(4, 3, 128, 128, generator=g)
+    tokens = torch.randint(2, after.cfg.vocab_size, (4, 24), generator=g)
+    proprio = torch.randn(4, after.cfg.dof + 1, generator=g)
+    with torch.no_grad():
+        for mode in (0, 1):  # global, local: identical
+            m = torch.full((4,), mode)
+            a, b = after(img, tokens, m, proprio), before(img, tokens, m, proprio)
+            for k in ("uv_px", "z_m", "grip_logit"):
+                assert torch.equal(a[k], b[k]), (mode, k)
+        m = torch.full((4,), 2)  # detect: trained
+        assert not torch.equal(after(img, tokens, m, proprio)["success_logit"],
+                               before(img, tokens, m, proprio)["success_logit"])
+        # the copied head reproduces the shared head's detector exactly before any step
+        fresh = PlannerNet(after.cfg)
+        fresh.load_state_dict(before.state_dict(), strict=False)
+        fresh.init_detect_head()
+        fresh.eval()
+        assert torch.allclose(fresh(img, tokens, m, proprio)["success_logit"],
+                              before(img, tokens, m, proprio)["success_logit"], atol=1e-6)
+
+
+def test_detect_only_finetune_config_is_checked(demo_file, tmp_path):
+    with pytest.raises(ConfigError, match="trainable = 'frozen' is not valid; choose one of all, detect"):
+        _cfg(demo_file, tmp_path / "x.safetensors", trainable="frozen")
+    with pytest.raises(ConfigError, match=r"model.detect_head = False \(needs True\).*stage1_epochs = 1 \(needs 0\)"
+                                          r".*mix_stage2.detect_frac = 0.2 \(needs 1.0\)"):
+        _cfg(demo_file, tmp_path / "x.safetensors", trainable="detect", init="x.safetensors")
+    with pytest.raises(ConfigError, match="set init"):
+        _cfg(demo_file, tmp_path / "x.safetensors", trainable="detect", stage1_epochs=0,
+             model=ModelConfig(width=8, detect_head=True),
+             mix_stage2=MixConfig(global_frac=0.0, local_frac=0.0, detect_frac=1.0))
+    with pytest.raises(ConfigError, match="model.detect_head needs model.kind 'trajectory'"):
+        ModelConfig(kind="direct", detect_head=True)

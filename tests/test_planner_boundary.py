@@ -120,8 +120,9 @@ def test_factories_get_the_context_they_are_entitled_to():
         stack = build_stack(RunConfig(task="goal_cube_on_plate", seed=1, planner="spy_observer"))
         ctx = seen["observer"]
         assert type(ctx) is ObservationContext
-        assert {f.name for f in dataclasses.fields(ctx)} == {"camera", "robot_name", "options", "robot"}
+        assert {f.name for f in dataclasses.fields(ctx)} == {"camera", "robot_name", "options", "robot", "world_kind"}
         assert type(ctx.robot).__name__ == "RobotSpec"  # the arm's own model (checkpoint matching), not the world
+        assert ctx.world_kind == "workcell"  # which world (a string: checkpoints are matched to it), not its state
         assert not hasattr(ctx, "world") and not hasattr(ctx, "task")
         build_stack(RunConfig(task="goal_cube_on_plate", seed=1, planner="spy_privileged"))
         assert type(seen["privileged"]) is PlannerContext and isinstance(seen["privileged"].world, World)

@@ -28,7 +28,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from tcot_hybrid.data.dataset import (  # noqa: E402
-    DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, VALID_EVERY, DemoFile, env_difference, image_key, is_valid_seed,
+    DEMO_PREFIX, FORMAT, PARTIAL_PREFIX, PER_DEMO, VALID_EVERY, DemoFile, env_difference, image_key,
+    is_valid_seed,
 )
 from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
@@ -38,6 +39,7 @@ TRAIN_SEED_LIMIT = 1000  # workcell seeds >= this are evaluation seeds: never co
 # LIBERO: sampled layouts 0-49999 are for training and tuning, 90000+ report (docs/seeds.md); the shipped init
 # states are the test set and are never collected.
 LIBERO_TRAIN_SEED_LIMIT = 50000
+SCENE_BLOCK = 5  # LIBERO: seeds of one task collected in a row (scene reuse), see collect()
 GZIP_LEVEL = 4  # measured on 128x128 frames: 6.5 KB/frame vs 10.5 KB with lzf, same read speed
 
 
@@ -147,12 +149,18 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         "recover_step": int(replans[0]) if replans else -1,
         "success": bool(rec["success"]), "t_success": int(hits[0]) if hits.size else -1, "num_samples": n,
         "fault": rec.get("fault") or "",
+        # this demo's planner camera and support height: LIBERO's agentview takes four poses across its scenes
+        "K": np.asarray(cam.K, dtype=float), "T_world_cam": np.asarray(cam.T_world_cam, dtype=float),
+        "support_z": float(sim.support_z),
     }
     env_args = {
         "robot": cfg.robot, "camera": camera, "K": cam.K.tolist(), "T_world_cam": cam.T_world_cam.tolist(),
         "width": cam.width, "height": cam.height, "near_m": cam.near_m, "far_m": cam.far_m,
         "sim_dt": cfg.timing.sim_dt, "ctrl_dt": cfg.timing.ctrl_dt, "plan_dt": cfg.timing.plan_dt,
         "config_hash": collection_hash(cfg), "controller": cfg.controller, "ik": cfg.ik,
+        "world": task.world_kind,
+        # K / T_world_cam above are the first demo's; on LIBERO every demo's own are its attributes
+        PER_DEMO: task.world_kind == "libero",
     }
     sim.close()
     return DemoRecord(attrs=attrs, arrays=arrays, env_args=env_args, wall_s=time.perf_counter() - t0)
@@ -324,6 +332,8 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
     defaults to the base config's perturbation. Returns a summary."""
     from tqdm import tqdm
 
+    from tcot_hybrid.tasks import is_libero_task
+
     path = Path(out)
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
@@ -343,8 +353,12 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         _precheck_env(path, h5, base_cfg)
         done = _existing_episodes(h5)
         perturbs = perturbs or [base_cfg.perturb.name]
-        # seed-major: an interruption leaves tasks and perturbations balanced
-        pairs = [(t, s, p) for s in seeds for p in perturbs for t in tasks]
+        # seed-major: an interruption leaves tasks and perturbations balanced. A LIBERO scene takes 2-4 s to
+        # build and a worker reuses its last ones: there, blocks of SCENE_BLOCK seeds run task by task, and a
+        # worker takes a block of one task at a time (chunksize)
+        block = SCENE_BLOCK if any(is_libero_task(t) for t in tasks) else 1
+        pairs = [(t, s, p) for b in range(0, len(seeds), block) for t in tasks for s in seeds[b:b + block]
+                 for p in perturbs] if block > 1 else [(t, s, p) for s in seeds for p in perturbs for t in tasks]
         todo = [key for key in pairs if key not in done]
         cfgs = [dataclasses.replace(base_cfg, task=t, seed=s, perturb=dataclasses.replace(base_cfg.perturb, name=p))
                 for (t, s, p) in todo]
@@ -354,7 +368,8 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                 results = map(_worker, [(c, image_every) for c in cfgs])
             else:
                 pool = mp.get_context("spawn").Pool(min(workers, len(cfgs)), maxtasksperchild=40)
-                results = pool.imap_unordered(_worker, [(c, image_every) for c in cfgs], chunksize=1)
+                results = pool.imap_unordered(_worker, [(c, image_every) for c in cfgs],
+                                              chunksize=block * len(perturbs) if block > 1 else 1)
             with tqdm(total=len(pairs), initial=len(pairs) - len(todo), desc=f"collect {path.name}", unit="demo",
                       disable=not progress) as bar:
                 for status, payload in results:

@@ -7,6 +7,9 @@ Layout (``docs/dataset.md`` describes every field)::
     /data/demo_<i>        attrs: task, suite, instruction, seed, robot, planner, mode, perturb, perturb_step,
                                  recover_step, source,
                                  success, t_success, num_samples
+                          optional attrs: K (3x3), T_world_cam (4x4), support_z: this demo's planner camera and
+                                 support height (files with env_args camera_per_demo = true must have them; LIBERO's
+                                 agentview takes four poses across its scenes)
         obs/<camera>_image, obs/robot0_*, obs/eef_uv_px, obs/eef_depth_m, task_success, actions
         obs/image_valid (optional, uint8 (T,)): which samples have a rendered image (``tcot collect
                          --image-every``); absent = all of them
@@ -57,14 +60,26 @@ SOURCES = ("demo", "rollout")
 
 
 CAMERA_KEYS = ("K", "T_world_cam")
+PER_DEMO = "camera_per_demo"  # env_args flag: every demo carries its own camera (K, T_world_cam attributes)
+
+
+def camera_per_demo(env_args: dict) -> bool:
+    """Whether a file's demos carry their own planner camera (LIBERO) instead of one per file (workcell)."""
+    return bool(env_args.get(PER_DEMO, False))
 
 
 def env_difference(have: dict, want: dict, keys: tuple[str, ...]) -> str | None:
     """The first way two env_args differ in ``keys`` or the camera (``K``, ``T_world_cam``), as text
-    (``"robot = 'panda', not 'ur5e'"``), or None when they agree."""
+    (``"robot = 'panda', not 'ur5e'"``), or None when they agree. Files whose demos carry their own camera
+    (``camera_per_demo``) agree on the camera's name and size only; one per-demo file and one per-file file
+    never agree."""
     for key in keys:
         if have.get(key) != want.get(key):
             return f"{key} = {have.get(key)!r}, not {want.get(key)!r}"
+    if camera_per_demo(have) != camera_per_demo(want):
+        return f"{PER_DEMO} = {camera_per_demo(have)}, not {camera_per_demo(want)}"
+    if camera_per_demo(have):
+        return None
     for key in CAMERA_KEYS:
         if not np.allclose(have[key], want[key], atol=1e-9):
             return f"camera {key} differs"
@@ -258,6 +273,8 @@ class DemoFile:
                 raise self._fail(f"{where} lacks attribute {key!r}")
             values[key] = _coerce_attr(self.path, where, key, g.attrs[key], tp)
         info = DemoInfo(name=name, **values)
+        if camera_per_demo(self.env_args):
+            self._demo_camera_arrays(name, where)
         n = info.num_samples
         if n < 1:
             raise self._fail(f"{where} num_samples = {n}, expected >= 1")
@@ -283,6 +300,19 @@ class DemoFile:
                 raise self._fail(f"{where}/{key} has shape {shape}, expected {tuple(want)} "
                                  f"(num_samples = {n})")
         return info
+
+    def _demo_camera_arrays(self, name: str, where: str) -> tuple[np.ndarray, np.ndarray, float]:
+        a = self._h5["data"][name].attrs
+        missing = [k for k in (*CAMERA_KEYS, "support_z") if k not in a]
+        if missing:
+            raise self._fail(f"{where} lacks attribute(s) {missing} (the file's env_args say camera_per_demo)")
+        K, T = np.asarray(a["K"], dtype=float), np.asarray(a["T_world_cam"], dtype=float)
+        sz = float(np.asarray(a["support_z"], dtype=float))
+        if K.shape != (3, 3) or T.shape != (4, 4) or not (np.isfinite(K).all() and np.isfinite(T).all()
+                                                         and np.isfinite(sz)):
+            raise self._fail(f"{where} K must be a finite 3x3, T_world_cam a finite 4x4 and support_z finite, got "
+                             f"shapes {K.shape}, {T.shape} and {sz}")
+        return K, T, sz
 
     # --- access --------------------------------------------------------------------------------------
     def _check_open(self) -> None:
@@ -353,13 +383,23 @@ class DemoFile:
         for name in self.demos:
             self.read(name)
 
-    def camera_model(self):
-        """The planner camera of this file as a :class:`~tcot_hybrid.camera.CameraModel`."""
+    @property
+    def camera_per_demo(self) -> bool:
+        """Whether every demo carries its own planner camera (:meth:`camera_model` with a demo name)."""
+        return camera_per_demo(self.env_args)
+
+    def camera_model(self, name: str | None = None):
+        """The planner camera as a :class:`~tcot_hybrid.camera.CameraModel`: demo ``name``'s own when the file
+        stores one per demo (LIBERO), else the file's (the first demo's when ``name`` is None)."""
         from tcot_hybrid.camera import CameraModel
 
         env = self.env_args
+        K, T = np.asarray(env["K"]), np.asarray(env["T_world_cam"])
+        if name is not None and self.camera_per_demo:
+            self.info(name)
+            K, T, _ = self._demo_camera_arrays(name, f"/data/{name}")
         return CameraModel(name=self.camera, width=int(env["width"]), height=int(env["height"]),
-                           K=np.asarray(env["K"]), T_world_cam=np.asarray(env["T_world_cam"]),
+                           K=K, T_world_cam=T,
                            near_m=float(env.get("near_m", 0.01)), far_m=float(env.get("far_m", 50.0)))
 
 

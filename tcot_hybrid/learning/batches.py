@@ -76,6 +76,7 @@ class Batcher:
             "uv": torch.cat([f.g_uv[ti], f.l_uv[ti]], dim=1) + sh[:, None, :],
             "z": torch.cat([f.g_z[ti], f.l_z[ti]], dim=1),
             "grip": torch.cat([f.g_grip[ti], f.l_grip[ti]], dim=1),
+            "rot": torch.cat([f.g_rot[ti], f.l_rot[ti]], dim=1),
             "success": f.success[ti], "d_delta": f.d_delta[ti], "d_grip": f.d_grip[ti],
         }
 

@@ -11,9 +11,11 @@ byte buffer by ``safetensors``), and every problem is a :class:`CheckpointError`
 * weights that do not match their metadata (hash), NaN/inf values, missing/unexpected keys, wrong shapes,
 * metadata that is not what was saved (``metadata_sha256``, a digest over every other metadata field,
   so a relabelled robot or camera is refused), malformed metadata (wrong types, nesting, size),
-* a checkpoint made for another robot model (matched by :func:`tcot_hybrid.robot.robot_model_digest`,
-  not by name), joint count, planner camera (name, K, pose) or image size than the run, or for another
-  planner kind (trajectory vs direct).
+* a checkpoint made for another world (``world``: ``workcell`` or ``libero``; checkpoints written before the
+  field existed are workcell ones), robot model (matched by :func:`tcot_hybrid.robot.robot_model_digest`, not
+  by name), joint count, planner camera (name, K, pose; a checkpoint trained on several scenes' cameras,
+  ``camera.per_scene``, only name and image size) or image size than the run, or for another planner kind
+  (trajectory vs direct).
 """
 from __future__ import annotations
 
@@ -43,6 +45,13 @@ MAX_META_BYTES = 4 * 1024 * 1024  # the shipped metadata is ~5 kB
 _PICKLE_MAGIC = (b"\x80\x02", b"\x80\x03", b"\x80\x04", b"\x80\x05")
 _ZIP_MAGIC = b"PK\x03\x04"
 CAMERA_ATOL = {"K": 1e-6, "T_world_cam": 1e-6}
+WORLDS = ("workcell", "libero")
+HEIGHT_REFS = ("world", "camera")
+
+
+def checkpoint_world(meta: dict) -> str:
+    """The world a checkpoint was trained in (metadata written before ``world`` existed: the workcell)."""
+    return meta.get("world", "workcell")
 
 
 class Checkpoint(NamedTuple):
@@ -282,19 +291,30 @@ def _check_meta_types(meta: dict, where: str) -> None:
                                           f"{short_repr(v)}")
             elif not isinstance(v, int) or isinstance(v, bool):
                 raise CheckpointError(f"{where}: windows.{k} must be an integer, got {short_repr(v)}")
+    if checkpoint_world(meta) not in WORLDS:
+        raise bad("world", f"one of {', '.join(WORLDS)}")
+    if meta.get("height_ref", "world") not in HEIGHT_REFS:
+        raise bad("height_ref", f"one of {', '.join(HEIGHT_REFS)}")
+    if not isinstance(cam.get("per_scene", False), bool):
+        raise CheckpointError(f"{where}: camera.per_scene must be true or false, got {short_repr(cam.get('per_scene'))}")
     if "max_unknown_fraction" in meta and not (number(meta["max_unknown_fraction"])
                                                and 0 <= meta["max_unknown_fraction"] <= 1):
         raise bad("max_unknown_fraction", "a number in [0, 1]")
 
 
 def check_compatible(meta: dict, *, robot: str | None = None, camera=None, kind: str | None = None,
-                     where: str = "checkpoint", robot_spec=None) -> None:
-    """Refuse a checkpoint made for another robot, planner camera, image size or planner kind.
+                     where: str = "checkpoint", robot_spec=None, world: str | None = None) -> None:
+    """Refuse a checkpoint made for another world, robot, planner camera, image size or planner kind.
 
     With ``robot_spec`` the robot is matched by its model digest (:func:`robot_model_digest`), not its name:
     a different arm under the same name is refused, the same model under another name accepted."""
     if kind is not None and meta.get("kind") != kind:
         raise CheckpointError(f"{where} is a {meta.get('kind')!r} planner checkpoint; this planner needs {kind!r}")
+    if world is not None and checkpoint_world(meta) != world:
+        raise CheckpointError(
+            f"{where} was trained in the {checkpoint_world(meta)!r} world (robot {short_repr(meta.get('robot'))}), but "
+            f"this run's task is in the {world!r} world (worlds: {', '.join(WORLDS)}); use that world's checkpoint "
+            f"(leave --checkpoint out to get the shipped one for the robot) or train one there")
     if robot_spec is not None:
         from tcot_hybrid.robot import robot_model_digest
 
@@ -317,7 +337,8 @@ def check_compatible(meta: dict, *, robot: str | None = None, camera=None, kind:
         if (cm.get("width"), cm.get("height")) != (camera.width, camera.height):
             raise CheckpointError(f"{where} was trained on {cm.get('width')}x{cm.get('height')} px images, but this "
                                   f"run's planner image is {camera.width}x{camera.height} px")
-        for key, tol in CAMERA_ATOL.items():
+        # trained on several scenes' camera poses (LIBERO): the planner lifts with the run's own calibration
+        for key, tol in ({} if cm.get("per_scene", False) else CAMERA_ATOL).items():
             try:
                 ref = np.asarray(cm.get(key), dtype=float)
             except (TypeError, ValueError):
@@ -330,7 +351,7 @@ def check_compatible(meta: dict, *, robot: str | None = None, camera=None, kind:
 
 
 def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, kind: str | None = None,
-                    robot_spec=None) -> Checkpoint:
+                    robot_spec=None, world: str | None = None) -> Checkpoint:
     """Validate and load a checkpoint; ``robot``/``camera``/``kind`` (when given) must match its metadata.
 
     ``robot_spec`` (the run's RobotSpec) matches the robot by model digest and its joint count against the
@@ -350,7 +371,7 @@ def load_checkpoint(path: str | Path, *, robot: str | None = None, camera=None, 
     if sha256_bytes(blob) != meta["weights_sha256"]:
         raise CheckpointError(f"{where}: weights do not match the SHA-256 recorded in {meta_path(p).name} "
                               f"(modified or mixed-up files)")
-    check_compatible(meta, robot=robot, camera=camera, kind=kind, where=where, robot_spec=robot_spec)
+    check_compatible(meta, robot=robot, camera=camera, kind=kind, where=where, robot_spec=robot_spec, world=world)
     try:
         cfg = from_mapping(ModelConfig, meta["model"], prefix="model")
     except ConfigError as exc:
@@ -417,6 +438,11 @@ def default_checkpoint(robot: str, kind: str = "trajectory", *, robot_ref: str |
     p = checkpoints_dir() / f"{stem}{SUFFIX}"
     if not p.is_file():
         have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}")) if checkpoints_dir().is_dir() else []
+        if robot == "libero_panda" and kind == "trajectory":  # LIBERO's own robot: its planner has its own pipeline
+            raise CheckpointError(
+                f"no shipped trajectory planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
+                f"{', '.join(have) or 'none'}. Build it with `make libero-planner` (LIBERO demonstrations on sampled "
+                f"layouts, then training; docs/libero-planner.md), or pass --checkpoint")
         raise CheckpointError(
             f"no shipped {kind} planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
             f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot_ref or robot} --data "

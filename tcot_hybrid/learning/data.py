@@ -29,8 +29,41 @@ from tcot_hybrid.errors import DatasetError
 from tcot_hybrid.learning.vocab import Vocabulary
 
 RECOVERY_DENSE_STEPS = 10  # frames kept at stride 1 from a recovery's first plan on (the arm turns there)
-_KEYS = ("obs/robot0_joint_pos", "obs/robot0_eef_pos", "obs/robot0_gripper_closed", "obs/eef_uv_px",
-         "task_success")
+_KEYS = ("obs/robot0_joint_pos", "obs/robot0_eef_pos", "obs/robot0_eef_quat", "obs/robot0_gripper_closed",
+         "obs/eef_uv_px", "task_success")
+HEIGHT_REFS = ("world", "camera")
+
+
+def height_reference(camera, height_ref: str) -> float:
+    """[m] world height the lift cue z_m is measured from: 0 (``world``: the workcell's table top is z = 0) or the
+    planner camera's own height (``camera``: LIBERO's scenes put their table at 0, 0.42 or 0.9 m and their camera
+    with it; the planner knows its camera's calibration, not the table's height)."""
+    from tcot_hybrid.errors import ConfigError
+
+    if height_ref == "world":
+        return 0.0
+    if height_ref == "camera":
+        return float(np.asarray(camera.T_world_cam)[2, 3])
+    raise ConfigError(f"height_ref = {height_ref!r} is not one of {', '.join(HEIGHT_REFS)}")
+
+
+def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions (w, x, y, z) → (..., 3, 3) rotation matrices."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def camera_rot6(camera, R_world: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) TCP orientations in the world → (..., 6) in ``camera``'s frame (x column, then y column)."""
+    from tcot_hybrid.learning.model import matrix_to_rot6
+
+    R_cw = np.asarray(camera.T_world_cam, dtype=float)[:3, :3].T
+    return matrix_to_rot6(R_cw @ R_world).astype(np.float32)
 
 
 @dataclass
@@ -44,10 +77,12 @@ class FrameSet:
     g_z: torch.Tensor  # (N, L_g) [m]
     g_grip: torch.Tensor  # (N, L_g) float 0/1
     g_xyz: torch.Tensor  # (N, L_g, 3) [m] ground-truth TCP points
+    g_rot: torch.Tensor  # (N, L_g, 6) TCP orientation in the frame's planner camera (x, y columns)
     l_uv: torch.Tensor
     l_z: torch.Tensor
     l_grip: torch.Tensor
     l_xyz: torch.Tensor
+    l_rot: torch.Tensor
     success: torch.Tensor  # (N,) float 0/1
     traj: np.ndarray  # (N,) bool: trajectory labels are imitated (else a failure-detection frame only)
     online: np.ndarray  # (N,) bool: from an online file (rollout or perturbed recovery), not a demonstration
@@ -55,9 +90,12 @@ class FrameSet:
     d_grip: torch.Tensor  # (N,) float 0/1 gripper command direct_horizon steps ahead
     demo: np.ndarray  # (N,) demo index into ``demos``
     t: np.ndarray  # (N,) sample index within the demo
+    cam: np.ndarray  # (N,) index into ``cameras``: the frame's planner camera (one per demo on LIBERO)
+    z_ref: np.ndarray  # (N,) [m] world height the frame's z labels are measured from (``height_reference``)
     demos: list[str]
     tasks: list[str]
     instructions: list[str]
+    cameras: list  # CameraModel per camera index
 
     def __len__(self) -> int:
         return int(self.images.shape[0])
@@ -74,7 +112,7 @@ def file_hash(path: str | Path, *, chunk: int = 1 << 22) -> str:
 
 def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                 max_tokens: int, direct_horizon: int, max_demos: int | None = None,
-                successful_only: bool = True, frame_stride: int = 1) -> FrameSet:
+                successful_only: bool = True, frame_stride: int = 1, height_ref: str = "world") -> FrameSet:
     """Read split ``train``/``valid`` (or ``all``: both) of demo file ``path`` into memory with every label
     computed. Only successful demos carry trajectory labels worth imitating; ``successful_only`` drops the rest.
     ``frame_stride`` keeps every k-th frame of each demo (t = 0 always; labels still come from the whole track).
@@ -89,11 +127,12 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
         if not names:
             raise DatasetError(f"demo file {path}: split {split!r} has no usable demos")
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
-                            keep=lambda info, T: (np.arange(T) % frame_stride == 0, np.ones(T, bool)), online=False)
+                            keep=lambda info, T: (np.arange(T) % frame_stride == 0, np.ones(T, bool)), online=False,
+                            height_ref=height_ref)
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
-                       max_tokens: int, direct_horizon: int, frame_stride: int = 1) -> FrameSet:
+                       max_tokens: int, direct_horizon: int, frame_stride: int = 1, height_ref: str = "world") -> FrameSet:
     """Online episodes of ``path`` (split by seed like the demos, failed episodes included), every
     ``frame_stride``-th frame plus every success frame (and every frame of the first
     ``RECOVERY_DENSE_STEPS`` of a recovery): all for failure detection; those of successful
@@ -122,17 +161,26 @@ def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windo
             return rows, traj
 
         return _read_frames(f, names, vocab, windows=windows, max_tokens=max_tokens, direct_horizon=direct_horizon,
-                            keep=keep, online=True)
+                            keep=keep, online=True, height_ref=height_ref)
 
 
 def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryWindowConfig, max_tokens: int,
-                 direct_horizon: int, keep, online: bool) -> FrameSet:
+                 direct_horizon: int, keep, online: bool, height_ref: str = "world") -> FrameSet:
     """Frames of demos ``names`` of open file ``f``; ``keep(info, T) -> (rows kept, rows with trajectory
-    labels)`` as boolean masks over the demo's samples (labels always come from the whole track)."""
-    cols: dict[str, list] = {k: [] for k in ("img", "tok", "prop", "g", "l", "gx", "lx", "succ", "dd", "dg",
-                                             "demo", "t", "traj")}
+    labels)`` as boolean masks over the demo's samples (labels always come from the whole track). Heights are
+    measured from ``height_reference(camera, height_ref)`` of each demo's own camera."""
+    cols: dict[str, list] = {k: [] for k in ("img", "tok", "prop", "g", "l", "gx", "lx", "gr", "lr", "succ", "dd",
+                                             "dg", "demo", "t", "traj", "cam", "zref")}
     tasks, instrs = [], []
+    cameras: list = []
+    cam_keys: dict[bytes, int] = {}
     for di, name in enumerate(names):
+        camera = f.camera_model(name)
+        key = np.r_[np.ravel(camera.K), np.ravel(camera.T_world_cam)].tobytes()
+        if key not in cam_keys:
+            cam_keys[key] = len(cameras)
+            cameras.append(camera)
+        zref = height_reference(camera, height_ref)
         info = f.info(name)
         arr = f.read(name, _KEYS)
         T = info.num_samples
@@ -148,10 +196,15 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         cols["img"].append(f.images(name)[r])
         cols["tok"].append(np.repeat(ids[None], len(r), axis=0))
         cols["prop"].append(np.c_[arr["obs/robot0_joint_pos"], grip].astype(np.float32)[r])
-        cols["g"].append((gl.uv_px[r], gl.z_m[r], gl.gripper_closed[r].astype(np.float32)))
-        cols["l"].append((ll.uv_px[r], ll.z_m[r], ll.gripper_closed[r].astype(np.float32)))
+        cols["g"].append((gl.uv_px[r], gl.z_m[r] - zref, gl.gripper_closed[r].astype(np.float32)))
+        cols["l"].append((ll.uv_px[r], ll.z_m[r] - zref, ll.gripper_closed[r].astype(np.float32)))
         cols["gx"].append(pos[gl.indices[r]])
         cols["lx"].append(pos[ll.indices[r]])
+        rot6 = camera_rot6(camera, quat_wxyz_to_matrix(arr["obs/robot0_eef_quat"]))  # (T, 6)
+        cols["gr"].append(rot6[gl.indices[r]])
+        cols["lr"].append(rot6[ll.indices[r]])
+        cols["cam"].append(np.full(len(r), cam_keys[key]))
+        cols["zref"].append(np.full(len(r), zref, np.float32))
         cols["succ"].append(arr["task_success"].astype(np.float32)[r])
         cols["dd"].append((pos[ahead] - pos)[r])
         cols["dg"].append(grip[ahead][r])
@@ -167,12 +220,12 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
 
     return FrameSet(
         images=cat("img"), tokens=cat("tok"), proprio=cat("prop"),
-        g_uv=cat("g", 0).float(), g_z=cat("g", 1).float(), g_grip=cat("g", 2), g_xyz=cat("gx"),
-        l_uv=cat("l", 0).float(), l_z=cat("l", 1).float(), l_grip=cat("l", 2), l_xyz=cat("lx"),
+        g_uv=cat("g", 0).float(), g_z=cat("g", 1).float(), g_grip=cat("g", 2), g_xyz=cat("gx"), g_rot=cat("gr"),
+        l_uv=cat("l", 0).float(), l_z=cat("l", 1).float(), l_grip=cat("l", 2), l_xyz=cat("lx"), l_rot=cat("lr"),
         success=cat("succ"), traj=np.concatenate(cols["traj"]), online=np.full(sum(map(len, cols["t"])), online),
         d_delta=cat("dd"), d_grip=cat("dg"),
-        demo=np.concatenate(cols["demo"]), t=np.concatenate(cols["t"]), demos=names, tasks=tasks,
-        instructions=instrs)
+        demo=np.concatenate(cols["demo"]), t=np.concatenate(cols["t"]), cam=np.concatenate(cols["cam"]),
+        z_ref=np.concatenate(cols["zref"]), demos=names, tasks=tasks, instructions=instrs, cameras=cameras)
 
 
 def concat_frames(sets: list[FrameSet]) -> FrameSet:
@@ -180,11 +233,14 @@ def concat_frames(sets: list[FrameSet]) -> FrameSet:
     if len(sets) == 1:
         return sets[0]
     offsets = np.cumsum([0] + [len(s.demos) for s in sets[:-1]])
+    cam_offsets = np.cumsum([0] + [len(s.cameras) for s in sets[:-1]])
     out = {}
     for fld in dataclasses.fields(FrameSet):
         vals = [getattr(s, fld.name) for s in sets]
         if fld.name == "demo":
             out["demo"] = np.concatenate([v + o for v, o in zip(vals, offsets)])
+        elif fld.name == "cam":
+            out["cam"] = np.concatenate([v + o for v, o in zip(vals, cam_offsets)])
         elif isinstance(vals[0], torch.Tensor):
             out[fld.name] = torch.cat(vals)
         elif isinstance(vals[0], np.ndarray):
@@ -200,6 +256,7 @@ def instructions_of(path: str | Path, split: str = "train") -> list[str]:
 
 
 def env_of(path: str | Path) -> tuple[dict, object, int]:
-    """(env_args, planner CameraModel, dof) of a demo file."""
+    """(env_args, planner CameraModel, dof) of a demo file (the camera: the file's, or its first demo's when every
+    demo carries its own)."""
     with open_demos(path) as f:
         return dict(f.env_args), f.camera_model(), int(f.dof or 0)

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 
+ROT_UNIT = 0.1  # orientation loss unit: a 0.1 rad turn costs about as much as 1-2 px of waypoint error
+
+
 def trajectory_loss(out: dict, b: dict, n_global: int, *, heatmap_ce: float = 0.0, image_px: int = 128) -> tuple:
     """Per-sample loss for the sample's own mode; returns (loss, parts dict)."""
     import torch
@@ -22,6 +25,11 @@ def trajectory_loss(out: dict, b: dict, n_global: int, *, heatmap_ce: float = 0.
     total = l_px + l_z + l_gr + l_det
     parts = {"px": l_px.sum() / traj.sum().clamp_min(1), "z_cm": l_z.sum() / traj.sum().clamp_min(1),
              "grip": l_gr.sum() / traj.sum().clamp_min(1), "detect": l_det.sum() / det.sum().clamp_min(1)}
+    if "rot6" in out:  # orientation: the two columns' error in units of ROT_UNIT (~ that many rad of turn)
+        ro = F.smooth_l1_loss(out["rot6"] / ROT_UNIT, b["rot"] / ROT_UNIT, reduction="none", beta=1.0).sum(-1)
+        l_rot = (ro * wmask).sum(1)
+        total = total + l_rot
+        parts["rot"] = l_rot.sum() / traj.sum().clamp_min(1)
     if heatmap_ce > 0 and "heat_logits" in out:
         logits = out["heat_logits"]
         bsz, k, h, w = logits.shape
@@ -37,6 +45,14 @@ def trajectory_loss(out: dict, b: dict, n_global: int, *, heatmap_ce: float = 0.
         total = total + heatmap_ce * l_ce
         parts["heat_ce"] = l_ce.sum() / traj.sum().clamp_min(1)
     return total.mean(), parts
+
+
+def detect_loss(out: dict, b: dict) -> tuple:
+    """Failure-detection loss alone (every sample a detect prompt; ``trainable: detect``)."""
+    import torch.nn.functional as F
+
+    l_det = F.binary_cross_entropy_with_logits(out["success_logit"], b["success"])
+    return l_det, {"detect": l_det}
 
 
 def direct_loss(out: dict, b: dict) -> tuple:

@@ -12,6 +12,10 @@ Trajectory model (``kind="trajectory"``) outputs, for every mode's head at once 
              per-waypoint height map weighted by the same softmax (spatial read-out)
   grip_logit (B, n_global + n_local) gripper-closed logit per waypoint (from pooled features)
   success_logit (B,) task-success logit (detect mode; from pooled features)
+  rot6       (B, n_global + n_local, 6) with ``rot_head``: the TCP orientation per waypoint in the planner
+             camera's frame (OpenCV: x right, y down, z forward) as its first two columns (x then y axis; the
+             "6D" rotation form), read out of six per-waypoint maps with the same softmax as z_m;
+             :func:`rot6_to_matrix` makes it a rotation (Gram-Schmidt)
 The first ``n_global`` waypoints belong to the global head, the next ``n_local`` to the local head.
 
 Direct model (``kind="direct"``, the paper's no-trajectory baseline) outputs
@@ -55,8 +59,15 @@ class ModelConfig:
     readout_radius_cells: 0 = soft-argmax over the whole heatmap; r > 0 = at inference only, soft-argmax
                  over the (2r+1)^2 cells around the peak (picks one mode of a multi-modal heatmap instead of
                  averaging modes, which cuts corners of the path). Training always uses the full map.
-    z_offset_m, z_scale_m: height read-out is z_offset_m + z_scale_m * map value [m].
+    z_offset_m, z_scale_m: height read-out is z_offset_m + z_scale_m * map value [m] (its reference, world z or
+                 the camera's height, is the checkpoint's ``height_ref``).
+    rot_head:    also predict a TCP orientation per waypoint (``rot6``; LIBERO's tilted and turned grasps); heatmap
+                 head only. False = top-down plans (the workcell).
     delta_scale_m: direct model: predicted delta is delta_scale_m * raw output [m].
+    detect_head: trajectory model: the success logit comes from its own head (pooled -> 128 -> 1) instead of
+                 the last output of the head it shares with the gripper bits. Nothing else reads that head or
+                 the detect prompt's mode embedding, so the detector can be fine-tuned alone (``tcot train``
+                 ``trainable: detect``) while every waypoint output stays bit-identical.
     """
 
     kind: str = "trajectory"
@@ -75,6 +86,8 @@ class ModelConfig:
     z_offset_m: float = 0.15
     z_scale_m: float = 0.10
     delta_scale_m: float = 0.05
+    rot_head: bool = False
+    detect_head: bool = False
 
     def __post_init__(self) -> None:
         require_choice("model.kind", self.kind, KINDS)
@@ -93,6 +106,16 @@ class ModelConfig:
         require_int("model.readout_radius_cells", self.readout_radius_cells, minimum=0)
         for name in ("z_scale_m", "delta_scale_m"):
             require_positive(f"model.{name}", getattr(self, name))
+        if self.rot_head and (self.head != "heatmap" or self.kind != "trajectory"):
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"model.rot_head needs kind 'trajectory' and head 'heatmap', got kind {self.kind!r}, "
+                              f"head {self.head!r}")
+        if self.detect_head and self.kind != "trajectory":
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"model.detect_head needs model.kind 'trajectory' (the direct model has no detector), "
+                              f"got kind {self.kind!r}")
 
     @property
     def n_waypoints(self) -> int:
@@ -202,11 +225,33 @@ class PlannerNet(nn.Module):
         if cfg.head == "heatmap":
             self.l16, self.u8, self.f8 = nn.Conv2d(c3, c2, 1), _conv(c2, c2), FiLM(c2, cfg.cond_dim)
             self.l8, self.u4, self.f4 = nn.Conv2d(c2, c1, 1), _conv(c1, c1), FiLM(c1, cfg.cond_dim)
-            self.maps = nn.Conv2d(c1, 2 * n, 1)  # n heatmaps + n height maps
+            # n heatmaps + n height maps (+ 6n orientation maps)
+            self.maps = nn.Conv2d(c1, (8 if cfg.rot_head else 2) * n, 1)
         else:
             side = cfg.image_px // 16
             self.fc = nn.Sequential(nn.Flatten(), nn.Linear(c3 * side * side, 256), nn.ReLU(), nn.Linear(256, 3 * n))
         self.pooled_head = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, n + 1))
+        if cfg.detect_head:
+            self.detect_head = nn.Sequential(nn.Linear(pooled, 128), nn.ReLU(), nn.Linear(128, 1))
+
+    def detect_parameters(self) -> list[tuple[str, nn.Parameter, int | None]]:
+        """(name, parameter, row) of every weight only the detect prompt reads: the detect head and the detect
+        mode's embedding row (``row``: only that row of the tensor; None: all of it). Training only these
+        leaves every global and local output unchanged."""
+        if not self.cfg.detect_head:
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError("only a model with model.detect_head: true has weights the detector alone reads")
+        return [("modes.weight", self.modes.weight, MODE_IDS["detect"]),
+                *((f"detect_head.{k}", p, None) for k, p in self.detect_head.named_parameters())]
+
+    def init_detect_head(self) -> None:
+        """Copy the shared head's detection path into ``detect_head`` (same outputs as before it existed)."""
+        n = self.cfg.n_waypoints
+        with torch.no_grad():
+            self.detect_head[0].load_state_dict(self.pooled_head[0].state_dict())
+            self.detect_head[2].weight.copy_(self.pooled_head[2].weight[n:n + 1])
+            self.detect_head[2].bias.copy_(self.pooled_head[2].bias[n:n + 1])
 
     # ------------------------------------------------------------------------------------------------
     def condition(self, tokens: torch.Tensor, mode: torch.Tensor, proprio: torch.Tensor) -> torch.Tensor:
@@ -240,24 +285,34 @@ class PlannerNet(nn.Module):
             return {"delta_m": out[:, :3] * cfg.delta_scale_m, "grip_logit": out[:, 3:4]}
         n = cfg.n_waypoints
         pl = self.pooled_head(pooled).float()
-        res = {"grip_logit": pl[:, :n], "success_logit": pl[:, n]}
+        res = {"grip_logit": pl[:, :n],
+               "success_logit": self.detect_head(pooled).float()[:, 0] if cfg.detect_head else pl[:, n]}
         if not waypoints:
             return res
         if cfg.head == "heatmap":
             x = F.relu(self.f8(self.u8(F.relu(f8 + F.interpolate(self.l16(f16), scale_factor=2, mode="nearest"))), cond))
             x = F.relu(self.f4(self.u4(F.relu(f4 + F.interpolate(self.l8(x), scale_factor=2, mode="nearest"))), cond))
             maps = self.maps(x).float()
-            logits, heights = maps[:, :n], maps[:, n:]
+            logits, heights = maps[:, :n], maps[:, n:2 * n]
             b, _, h, w = logits.shape
             prob = torch.softmax(logits.flatten(2), dim=-1)  # (B, n, h*w)
             r = cfg.readout_radius_cells
+            rot = None
+            if cfg.rot_head:  # (B, 6, n, h*w): component-major, so each component reads like the height map
+                rot_maps = maps[:, 2 * n:].reshape(b, 6, n, h * w)
             if r > 0 and not self.training:  # mode-seeking read-out: only the cells around the peak
                 u, v, z = window_readout(prob, heights.flatten(2), h, w, r)
+                if cfg.rot_head:
+                    rot = torch.stack([window_readout(prob, rot_maps[:, c], h, w, r)[2] for c in range(6)], -1)
             else:  # expected cell under the whole map
                 p2 = prob.view(b, n, h, w)
                 u = (p2.sum(2) * torch.arange(w, device=x.device, dtype=torch.float32)).sum(-1)
                 v = (p2.sum(3) * torch.arange(h, device=x.device, dtype=torch.float32)).sum(-1)
                 z = (prob * heights.flatten(2)).sum(-1)
+                if cfg.rot_head:
+                    rot = (prob[:, None] * rot_maps).sum(-1).permute(0, 2, 1)  # (B, n, 6)
+            if rot is not None:
+                res["rot6"] = rot
             s = cfg.image_px / w  # cell c covers pixels c*s .. (c+1)*s: its centre is pixel (c + 0.5) * s - 0.5
             uv = (torch.stack([u, v], dim=-1) + 0.5) * s - 0.5
             res.update(uv_px=uv, z_m=cfg.z_offset_m + cfg.z_scale_m * z, heat_logits=logits)
@@ -266,6 +321,33 @@ class PlannerNet(nn.Module):
             half = cfg.image_px / 2
             res.update(uv_px=half - 0.5 + half * out[..., :2], z_m=cfg.z_offset_m + cfg.z_scale_m * out[..., 2])
         return res
+
+
+def rot6_to_matrix(r6):
+    """(..., 6) first two columns (x axis then y axis) → (..., 3, 3) rotation by Gram-Schmidt (numpy or torch).
+    Raises ValueError on a degenerate pair (zero or parallel columns)."""
+    import numpy as np
+
+    a = np.asarray(r6, dtype=float)
+    x, y = a[..., 0:3], a[..., 3:6]
+    nx = np.linalg.norm(x, axis=-1, keepdims=True)
+    if not np.isfinite(a).all() or (nx < 1e-6).any():
+        raise ValueError("orientation output is not finite or has a zero x column")
+    x = x / nx
+    y = y - (x * y).sum(-1, keepdims=True) * x
+    ny = np.linalg.norm(y, axis=-1, keepdims=True)
+    if (ny < 1e-6).any():
+        raise ValueError("orientation output has parallel x and y columns")
+    y = y / ny
+    return np.stack([x, y, np.cross(x, y)], axis=-1)
+
+
+def matrix_to_rot6(R):
+    """(..., 3, 3) rotation → (..., 6): its x column then its y column."""
+    import numpy as np
+
+    R = np.asarray(R)
+    return np.concatenate([R[..., :, 0], R[..., :, 1]], axis=-1)
 
 
 def count_parameters(model: nn.Module) -> int:

@@ -24,7 +24,7 @@ import numpy as np
 
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.learning.batches import Batcher
-from tcot_hybrid.learning.losses import direct_loss, trajectory_loss
+from tcot_hybrid.learning.losses import detect_loss, direct_loss, trajectory_loss
 from tcot_hybrid.learning.train_config import MixConfig, TrainConfig
 from tcot_hybrid.learning.validation import direct_metrics, trajectory_metrics, val_indices
 
@@ -57,7 +57,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
                                n_local=cfg.windows.L_l + 1, image_px=int(env["height"]))
     if int(env["height"]) != int(env["width"]):
         raise ConfigError(f"planner images must be square, data has {env['width']}x{env['height']}")
-    load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon)
+    load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon,
+                height_ref=cfg.height_ref)
     tr = load_frames(cfg.data, "train", vocab, max_demos=cfg.max_train_demos, **load)
     va = load_frames(cfg.data, "valid", vocab, **load)
     log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
@@ -93,7 +94,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     log(f"model {mcfg.kind}/{mcfg.head}: {count_parameters(model) / 1e6:.2f} M parameters")
     steps_per_epoch = math.ceil((cfg.epoch_samples or len(tr)) / cfg.batch_size)
     total_steps = steps_per_epoch * cfg.max_epochs
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    opt = torch.optim.AdamW(_param_groups(model, cfg, log), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=total_steps, pct_start=0.15)
     batcher = Batcher(tr, cfg, rng)
     vidx = val_indices(va, cfg.val_max_frames)
@@ -120,9 +121,11 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             idx, modes = batcher.indices(cfg.batch_size, mix)
             b = batcher.batch(idx, modes, augment=True)
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
-                o = model(b["image"], b["tokens"], b["mode"], b["proprio"])
+                o = model(b["image"], b["tokens"], b["mode"], b["proprio"], waypoints=cfg.trainable != "detect")
             if mcfg.kind == "direct":
                 loss, parts = direct_loss(o, b)
+            elif cfg.trainable == "detect":
+                loss, parts = detect_loss(o, b)
             else:
                 loss, parts = trajectory_loss(o, b, mcfg.n_global, heatmap_ce=cfg.heatmap_ce,
                                               image_px=mcfg.image_px)
@@ -143,7 +146,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             m = direct_metrics(model, va, vidx)
             score = m["delta_cm_median"]
         else:
-            m = trajectory_metrics(model, va, vidx, camera, n_global=mcfg.n_global, center=cfg.windows.global_center)
+            m = trajectory_metrics(model, va, vidx, n_global=mcfg.n_global, center=cfg.windows.global_center)
             score = m["px_median"] + 0.5 * m["global_t0_px_median"]
             if epoch > cfg.stage1_epochs and math.isfinite(m["success_auroc"]):
                 score += DETECT_SCORE_PX * (1.0 - m["success_auroc"])
@@ -167,9 +170,17 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             log(f"time cap: {cfg.max_minutes} min reached after epoch {epoch} (best epoch {best_epoch})")
             break
     model.load_state_dict(best_state)
+    if cfg.trainable == "detect":
+        _check_only_detector_changed(model, cfg.init)
     model = model.to(memory_format=torch.contiguous_format).eval()
+    from tcot_hybrid.data.dataset import camera_per_demo
+
+    cam_meta = camera_meta(camera)
+    if camera_per_demo(env):  # trained on several scenes' cameras: runs are checked on name and size only
+        cam_meta["per_scene"] = True
     meta = {
-        "robot": env["robot"], "camera": camera_meta(camera), "vocabulary": list(vocab.tokens),
+        "robot": env["robot"], "world": env.get("world", "workcell"), "height_ref": cfg.height_ref,
+        "camera": cam_meta, "vocabulary": list(vocab.tokens),
         "windows": dataclasses.asdict(cfg.windows), "direct_horizon": cfg.direct_horizon,
         "max_unknown_fraction": cfg.max_unknown_fraction,
         "data_hash": data_hash, "data_file": str(cfg.data), "extra_data": list(cfg.extra_data),
@@ -207,10 +218,62 @@ def _load_init(model, path: str, vocab, log) -> None:
                           f"{list(vocab.tokens)}")
     mine = dataclasses.replace(model.cfg, readout_radius_cells=0)
     theirs = dataclasses.replace(ck.model.cfg, readout_radius_cells=0)
-    if mine != theirs:
+    add_head = mine.detect_head and not theirs.detect_head  # a shared-head checkpoint gains its own detect head
+    if mine != dataclasses.replace(theirs, detect_head=theirs.detect_head or add_head):
         raise ConfigError(f"init checkpoint {path!r} has model {theirs}, this run builds {mine}")
-    model.load_state_dict(ck.model.state_dict())
-    log(f"initialised from {path}")
+    model.load_state_dict(ck.model.state_dict(), strict=not add_head)
+    if add_head:
+        model.init_detect_head()
+    log(f"initialised from {path}" + (" (detect head copied from its shared head)" if add_head else ""))
+
+
+def _param_groups(model, cfg: TrainConfig, log) -> list[dict]:
+    """AdamW parameter groups: every weight, or (``trainable: detect``) only those nothing but the detect prompt
+    reads. A weight of which only one row is the detector's (the detect mode's embedding row) gets a gradient
+    mask and no weight decay, so Adam never moves its other rows (zero gradient, zero update)."""
+    if cfg.trainable == "all":
+        return [{"params": list(model.parameters())}]
+    for p in model.parameters():
+        p.requires_grad_(False)
+    whole, rows = [], []
+    for name, p, row in model.detect_parameters():
+        p.requires_grad_(True)
+        if row is None:
+            whole.append(p)
+        else:
+            mask = _row_mask(p, row)
+            p.register_hook(lambda g, m=mask: g * m)
+            rows.append(p)
+    n = sum(p.numel() for p in whole) + sum(p.shape[-1] for p in rows)
+    log(f"trainable: detect — {n} weights (detect head + the detect mode's embedding row); the rest frozen")
+    return [{"params": whole}, {"params": rows, "weight_decay": 0.0}]
+
+
+def _row_mask(p, row: int):
+    """A 0/1 mask shaped like ``p``: ones on row ``row`` only."""
+    import torch
+
+    mask = torch.zeros_like(p)
+    mask[row] = 1.0
+    return mask
+
+
+def _check_only_detector_changed(model, init: str) -> None:
+    """After ``trainable: detect``: every weight a global or local output reads equals ``init``'s, bit for bit."""
+    import torch
+
+    from tcot_hybrid.learning.checkpoint import load_checkpoint
+
+    ref = load_checkpoint(init, kind=model.cfg.kind).model.state_dict()
+    detect = {name: row for name, _, row in model.detect_parameters()}
+    for k, v in model.state_dict().items():
+        if k not in ref or (k in detect and detect[k] is None):
+            continue  # the detect head (new, or the one being trained)
+        a, b = v.detach().cpu(), ref[k]
+        if k in detect:  # only the detect row may differ
+            a, b = torch.cat([a[:detect[k]], a[detect[k] + 1:]]), torch.cat([b[:detect[k]], b[detect[k] + 1:]])
+        if not torch.equal(a, b):
+            raise RuntimeError(f"trainable 'detect' changed {k!r}, which a trajectory output reads")
 
 
 _PROBE_STEPS = 6  # per thread count, at the start of every epoch (the first step of each is not timed)

@@ -16,6 +16,9 @@ from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.learning.model import ModelConfig
 
 
+TRAINABLE = ("all", "detect")
+
+
 @dataclass(frozen=True, kw_only=True)
 class MixConfig:
     """Fraction of each sample kind per batch (sums to 1). More of one kind = more of that objective."""
@@ -104,6 +107,11 @@ class TrainConfig:
                      opposite label; the detector learned to wait for the arm to move away and called the first
                      1-4 success steps failures. 0 = use every frame (rounds 1-2). Validation AUROC still
                      counts every frame.
+    trainable:       "all" (every weight) or "detect": fine-tune the failure detector alone, i.e. only the weights
+                     nothing but the detect prompt reads (``model.detect_head`` and the detect mode's embedding
+                     row; needs ``model.detect_head: true``, ``stage1_epochs: 0`` and a detect-only
+                     ``mix_stage2``). Every global and local output stays bit-identical to ``init``'s, so new
+                     success labels (e.g. stricter predicates) reach the detector without touching the plans.
     direct_horizon:  direct kind: predict the TCP displacement over this many planner steps.
     max_train_demos: use only the first N training demos (quick experiments, tests); None = all.
     val_max_frames:  validation frames per epoch (every k-th frame; all t = 0 frames kept). Down: faster epochs.
@@ -111,6 +119,9 @@ class TrainConfig:
     heatmap_ce:      weight of a cross-entropy term pulling each heatmap toward a 1-cell Gaussian at its
                      label (a shape prior for soft-argmax; 0 = coordinate loss only).
     max_unknown_fraction: stored in the checkpoint; the planner refuses instructions with more unknown words.
+    height_ref:      what the lift cue z_m is measured from: "world" (world z; the workcell's table top is z = 0) or
+                     "camera" (the planner camera's height: LIBERO's tables stand at 0, 0.42 or 0.9 m, each scene
+                     with its own camera pose). Stored in the checkpoint; the planner lifts with it.
     model:           architecture knobs (vocab_size, dof, n_global, n_local, image_px are filled from the data).
     windows:         label windows (paper eq. 4/5).
     """
@@ -138,18 +149,21 @@ class TrainConfig:
     mix_stage2: MixConfig = field(default_factory=lambda: MixConfig(global_frac=0.5, local_frac=0.3, detect_frac=0.2))
     recovery_frac: float = 0.6
     detect_ignore_before_success: int = 0
+    trainable: str = "all"
     direct_horizon: int = 3
     max_train_demos: int | None = None
     val_max_frames: int = 2000
     bf16: bool = True
     heatmap_ce: float = 0.5
     max_unknown_fraction: float = 0.5
+    height_ref: str = "world"
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     windows: TrajectoryWindowConfig = field(default_factory=TrajectoryWindowConfig)
 
     def __post_init__(self) -> None:
         require_choice("kind", self.kind, ("trajectory", "direct"))
+        require_choice("height_ref", self.height_ref, ("world", "camera"))
         for name in ("seed",):
             require_int(name, getattr(self, name), minimum=0)
         for name in ("batch_size", "max_epochs", "patience", "direct_horizon", "val_max_frames", "online_frame_stride",
@@ -177,6 +191,15 @@ class TrainConfig:
             object.__setattr__(self, "model", dataclasses.replace(self.model, kind="direct"))
         if self.kind == "trajectory" and self.model.kind != "trajectory":
             raise ConfigError("model.kind must be 'trajectory' when kind is 'trajectory'")
+        require_choice("trainable", self.trainable, TRAINABLE)
+        if self.trainable == "detect":
+            need = {"kind": (self.kind, "trajectory"), "model.detect_head": (self.model.detect_head, True),
+                    "stage1_epochs": (self.stage1_epochs, 0), "mix_stage2.detect_frac": (self.mix_stage2.detect_frac, 1.0)}
+            bad = [f"{k} = {v!r} (needs {want!r})" for k, (v, want) in need.items() if v != want]
+            if bad:
+                raise ConfigError(f"trainable 'detect' (fine-tune the detector alone) needs: {'; '.join(bad)}")
+            if self.init is None:
+                raise ConfigError("trainable 'detect' fine-tunes a trained planner's detector: set init to its checkpoint")
 
 
 def load_train_config(path: str | Path) -> TrainConfig:

@@ -41,27 +41,54 @@ def _stats(prefix: str, err: np.ndarray, scale: float = 1.0) -> dict:
     return {f"{prefix}_median": s["median"], f"{prefix}_p90": s["p90"]}
 
 
-def trajectory_metrics(model, frames, idx: np.ndarray, camera, *, n_global: int, center: int) -> dict:
+def lift_frames(frames, rows: np.ndarray, uv: np.ndarray, z: np.ndarray, camera=None) -> np.ndarray:
+    """(n, K, 3) world points of predicted pixels ``uv`` (n, K, 2) at label-frame heights ``z`` (n, K) of frames
+    ``rows``: each frame through its own planner camera and height reference (``camera``: one camera for all,
+    for frame sets without per-frame cameras)."""
+    z_world = z + frames.z_ref[rows][:, None]
+    if camera is not None or not getattr(frames, "cameras", None):
+        return points_at_height(camera, uv, z_world)
+    out = np.empty((*uv.shape[:-1], 3))
+    cam = frames.cam[rows]
+    for c in np.unique(cam):
+        sel = cam == c
+        out[sel] = points_at_height(frames.cameras[c], uv[sel], z_world[sel])
+    return out
+
+
+def rotation_error_deg(rot6_pred: np.ndarray, rot6_true: np.ndarray) -> np.ndarray:
+    """Angle [deg] between predicted (made a rotation by Gram-Schmidt) and labelled orientations (both (..., 6))."""
+    from tcot_hybrid.learning.model import rot6_to_matrix
+
+    Rp, Rt = rot6_to_matrix(rot6_pred), rot6_to_matrix(rot6_true)
+    cos = (np.einsum("...ij,...ij->...", Rp, Rt) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def trajectory_metrics(model, frames, idx: np.ndarray, camera=None, *, n_global: int, center: int) -> dict:
     """Held-out figures: pixel / 3D error, gripper accuracy (executed points: global k >= 0, all local),
-    at all steps and at t = 0, plus success-detection AUROC."""
+    at all steps and at t = 0, orientation error with a rotation head, plus success-detection AUROC. Points are
+    lifted through each frame's own camera (``camera`` overrides it for all)."""
     all_idx, idx = idx, idx[frames.traj[idx]]  # trajectory figures on imitated frames, detection on all
     g = predict(model, frames, idx, "global")
     lo = predict(model, frames, idx, "local")
     ti = idx
     out: dict = {"frames": int(len(idx)), "detect_frames": int(len(all_idx))}
     sel_g = slice(center, n_global)
-    for name, o, uv_t, z_t, gr_t, xyz_t, sl in (
-            ("global", g, frames.g_uv, frames.g_z, frames.g_grip, frames.g_xyz, sel_g),
-            ("local", lo, frames.l_uv, frames.l_z, frames.l_grip, frames.l_xyz, slice(n_global, None))):
+    for name, o, uv_t, z_t, gr_t, xyz_t, rot_t, sl in (
+            ("global", g, frames.g_uv, frames.g_z, frames.g_grip, frames.g_xyz, frames.g_rot, sel_g),
+            ("local", lo, frames.l_uv, frames.l_z, frames.l_grip, frames.l_xyz, frames.l_rot, slice(n_global, None))):
         uv = o["uv_px"][:, sl]
         z = o["z_m"][:, sl]
         grip = o["grip_logit"][:, sl] > 0
         if name == "global":
-            uvt, zt, grt, xyzt = (a[ti][:, center:].numpy() for a in (uv_t, z_t, gr_t, xyz_t))
+            uvt, zt, grt, xyzt, rott = (a[ti][:, center:].numpy() for a in (uv_t, z_t, gr_t, xyz_t, rot_t))
         else:
-            uvt, zt, grt, xyzt = (a[ti].numpy() for a in (uv_t, z_t, gr_t, xyz_t))
+            uvt, zt, grt, xyzt, rott = (a[ti].numpy() for a in (uv_t, z_t, gr_t, xyz_t, rot_t))
         px = np.linalg.norm(uv - uvt, axis=-1)
-        e3 = np.linalg.norm(points_at_height(camera, uv, z) - xyzt, axis=-1)
+        e3 = np.linalg.norm(lift_frames(frames, ti, uv, z, camera) - xyzt, axis=-1)
+        if "rot6" in o:
+            out.update(_stats(f"{name}_rot_deg", rotation_error_deg(o["rot6"][:, sl], rott)))
         out.update(_stats(f"{name}_px", px))
         out.update(_stats(f"{name}_3d_cm", e3, 100.0))
         out.update(_stats(f"{name}_z_cm", np.abs(z - zt), 100.0))

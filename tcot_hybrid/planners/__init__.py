@@ -26,6 +26,7 @@ class ObservationContext:
     options:    planner settings (``RunConfig.oracle`` / ``learned``, the checkpoint path).
     robot:      the run's RobotSpec (its model, as a real robot knows its own): checkpoints are matched to it
                 by model digest, not by name. None when unknown (then the name is compared).
+    world_kind: "workcell" or "libero": which world the task is in (checkpoints are refused in another world).
     At every step the planner then gets an :class:`Observation` (image, proprioception, instruction).
     """
 
@@ -33,6 +34,7 @@ class ObservationContext:
     robot_name: str
     options: dict[str, Any]
     robot: Any = None
+    world_kind: str = "workcell"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,10 +50,11 @@ class PlannerContext:
     robot_name: str
     options: dict[str, Any]
     robot: Any = None  # the run's RobotSpec: checkpoints are matched to it by model digest, not by name
+    world_kind: str = "workcell"  # "workcell" or "libero"
 
     def observation_only(self) -> ObservationContext:
         return ObservationContext(camera=self.camera, robot_name=self.robot_name, options=dict(self.options),
-                                  robot=self.robot)
+                                  robot=self.robot, world_kind=self.world_kind)
 
 
 _FACTORIES: dict[str, Callable[[Any], Planner]] = {}

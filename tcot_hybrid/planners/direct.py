@@ -57,7 +57,8 @@ class DirectPlanner(NetworkPlanner):
 
         path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"),
                                   robot_ref=robot_ref(ctx.robot) if ctx.robot is not None else None)
-        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot)
+        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot,
+                             world=ctx.world_kind)
         return cls(ck, ctx.camera, robot_name=ctx.robot_name)
 
     def plan(self, obs: Observation, *, mode: str = "direct") -> WaypointPlan:

@@ -8,7 +8,11 @@ the same :class:`WaypointPlan` the oracle emits, so the classical half of the st
   returned, the past ones are the model's progress context;
 * local: all L_l + 1 points of the eq.-5 window;
 * every waypoint carries the predicted TCP height ``z_m`` [m]; the plan's ``depth_m`` is where the
-  pixel's viewing ray meets the plane z = z_m (:func:`tcot_hybrid.camera.depth_at_height`).
+  pixel's viewing ray meets the plane z = z_m (:func:`tcot_hybrid.camera.depth_at_height`). The checkpoint's
+  ``height_ref`` says what the network's heights are measured from: world z (the workcell) or the planner
+  camera's height (LIBERO, whose tables stand at different heights); the plan is in world z either way;
+* a checkpoint with a rotation head (LIBERO) also gives every waypoint a TCP orientation, predicted in the
+  planner camera's frame and turned into the world with the camera's calibration: ``WaypointPlan.tcp_rot``.
 
 Inputs and outputs are checked: a wrong-size, wrong-dtype or blank image, non-finite joints, an
 instruction with too many unknown words, and non-finite outputs or probabilities outside [0, 1] all
@@ -126,7 +130,8 @@ def align_switches_to_dwells(points: np.ndarray, closed: np.ndarray, *, window: 
 
 
 def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
-                step: int, config: LearnedPlannerConfig, global_spacing: str, meta: dict | None = None) -> WaypointPlan:
+                step: int, config: LearnedPlannerConfig, global_spacing: str, meta: dict | None = None,
+                tcp_rot: np.ndarray | None = None) -> WaypointPlan:
     """The plan for waypoints given as pixel + TCP height + gripper bit (the learned planner's output form):
     ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
     and, in time-spaced global plans (``global_spacing`` of the windows the points follow), to where the arm
@@ -144,7 +149,7 @@ def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed:
         closed = align_switches_to_dwells(camera.unproject(uv_px, depth), closed, window=config.switch_window,
                                           leave_m=config.dwell_leave_m, dwell_m=config.dwell_step_m)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
-                        step=step, meta=meta or {})
+                        step=step, tcp_rot=tcp_rot, meta=meta or {})
 
 
 def check_image(image, camera: CameraModel) -> np.ndarray:
@@ -267,6 +272,10 @@ class LearnedPlanner(NetworkPlanner):
         if self.windows.L_g != self.cfg.n_global or self.windows.L_l + 1 != self.cfg.n_local:
             raise PlanningError(f"checkpoint windows {w} do not match its model ({self.cfg.n_global} global, "
                                 f"{self.cfg.n_local} local waypoints)")
+        from tcot_hybrid.learning.data import height_reference
+
+        self.z_ref = height_reference(camera, self.meta.get("height_ref", "world"))  # [m] world z of height 0
+        self.R_world_cam = np.asarray(camera.T_world_cam, dtype=float)[:3, :3]
 
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
@@ -277,7 +286,8 @@ class LearnedPlanner(NetworkPlanner):
 
         path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"),
                                   robot_ref=robot_ref(ctx.robot) if ctx.robot is not None else None)
-        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot)
+        ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot,
+                             world=ctx.world_kind)
         return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
 
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
@@ -286,12 +296,24 @@ class LearnedPlanner(NetworkPlanner):
         out = self.infer(obs, mode)
         ng = self.cfg.n_global
         sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, None)
-        uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float)
+        uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float) + self.z_ref
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
         check_outputs(uv, z, prob, min_height_m=self.config.min_height_m)
+        tcp_rot = self.orientations(out["rot6"][sl]) if "rot6" in out else None
         return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
-                           global_spacing=self.windows.global_spacing, meta={"z_m": z, "gripper_prob": prob})
+                           global_spacing=self.windows.global_spacing, meta={"z_m": z, "gripper_prob": prob},
+                           tcp_rot=tcp_rot)
+
+    def orientations(self, rot6: np.ndarray) -> np.ndarray:
+        """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs."""
+        from tcot_hybrid.learning.model import rot6_to_matrix
+
+        try:
+            R_cam = rot6_to_matrix(rot6)
+        except ValueError as exc:
+            raise PlanningError(f"planner orientation output cannot be made a rotation: {exc}") from exc
+        return self.R_world_cam @ R_cam
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""

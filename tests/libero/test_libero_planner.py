@@ -1,0 +1,81 @@
+"""The learned planner on LIBERO end to end on a tiny budget: oracle demonstrations on sampled layouts (training
+seeds) → a small network trained for one short epoch → its checkpoint (world, robot, per-scene camera, rotation
+head) → one GLSR episode on a shipped init state with plans that carry a TCP orientation per waypoint."""
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
+
+from tcot_hybrid.data.collect import collect  # noqa: E402
+from tcot_hybrid.data.dataset import open_demos  # noqa: E402
+from tcot_hybrid.episode import EpisodeRunner  # noqa: E402
+from tcot_hybrid.errors import CheckpointError  # noqa: E402
+from tcot_hybrid.learning.checkpoint import load_checkpoint, meta_path  # noqa: E402
+from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
+from tcot_hybrid.learning.train import train  # noqa: E402
+from tcot_hybrid.learning.train_config import TrainConfig  # noqa: E402
+from tcot_hybrid.run_config import RunConfig, SupervisorConfig  # noqa: E402
+
+SPATIAL_TASK = "libero_spatial:pick_up_the_black_bowl_between_the_plate_and_the_ramekin_and_place_it_on_the_plate"
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory):
+    d = tmp_path_factory.mktemp("libero_planner")
+    data = d / "demos.hdf5"
+    base = RunConfig(task=SPATIAL_TASK, robot="libero_panda", init="sampled")
+    s = collect(base, tasks=[SPATIAL_TASK], seeds=[0, 1, 2], out=data, workers=1, progress=False, image_every=3)
+    assert s.written == 3 and not s.crashes
+    cfg = TrainConfig(data=str(data), out=str(d / "tiny.safetensors"), height_ref="camera", threads=1,
+                      model=ModelConfig(width=8, rot_head=True, z_offset_m=-0.5),
+                      windows=dataclasses.replace(TrainConfig().windows, global_spacing="events"),
+                      max_epochs=1, stage1_epochs=0, epoch_samples=32, batch_size=16, val_max_frames=40)
+    res = train(cfg, progress=False, log=lambda *a: None)
+    return data, res
+
+
+def test_demos_carry_their_camera_and_orientation(tiny_checkpoint):
+    data, _ = tiny_checkpoint
+    with open_demos(data) as f:
+        assert f.camera_per_demo and f.env_args["world"] == "libero"
+        for name in f.demos:
+            cam = f.camera_model(name)
+            a = f.read(name, ["obs/robot0_eef_pos", "obs/eef_uv_px", "obs/robot0_eef_quat"])
+            uv, _ = cam.project(a["obs/robot0_eef_pos"].astype(float))  # the pixels are this demo's camera's
+            np.testing.assert_allclose(a["obs/eef_uv_px"], uv, atol=1e-3)
+            assert f.info(name).success
+
+
+def test_checkpoint_records_world_robot_and_is_refused_in_the_workcell(tiny_checkpoint):
+    _, res = tiny_checkpoint
+    meta = json.loads(meta_path(res.checkpoint).read_text())
+    assert (meta["world"], meta["robot"], meta["height_ref"]) == ("libero", "libero_panda", "camera")
+    assert meta["camera"]["per_scene"] and meta["model"]["rot_head"]
+    assert np.isfinite(res.metrics["global_rot_deg_median"])
+    with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
+        load_checkpoint(res.checkpoint, world="workcell")
+    with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
+        EpisodeRunner(RunConfig(task="goal_cube_in_bowl", planner="learned", checkpoint=str(res.checkpoint)))
+
+
+def test_one_glsr_episode_with_the_tiny_planner(tiny_checkpoint):
+    _, res = tiny_checkpoint
+    cfg = RunConfig(task=SPATIAL_TASK, seed=0, init="shipped", planner="learned", checkpoint=str(res.checkpoint),
+                    supervisor=SupervisorConfig(mode="glsr", t_f=8, t_l=4))
+    runner = EpisodeRunner(cfg)
+    runner.stack.task.time_limit_s = 2.5  # 25 planner steps: a global plan, detection and local replans
+    try:
+        result = runner.run()
+    finally:
+        runner.stack.sim.close()
+    assert runner.plans, result["events"][:5]
+    kinds = {p.kind for p in runner.plans}
+    assert "global" in kinds
+    for plan in runner.plans:  # the orientation head reaches the plan: a rotation per waypoint, world frame
+        assert plan.tcp_rot is not None and plan.tcp_rot.shape == (len(plan), 3, 3)
+        np.testing.assert_allclose(np.linalg.det(plan.tcp_rot), 1.0, atol=1e-6)
+    assert any(e["kind"] == "supervisor" for e in result["events"])
+    assert result["max_joint_limit_violation_rad"] < 0.05
