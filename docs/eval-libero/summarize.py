@@ -17,8 +17,8 @@ from tcot_hybrid.metrics import wilson_interval
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-# the controller x IK run is the one table not rerun at the oracle's last change (docs/libero.md says why)
-CONTROLLERS_IK_WHEN = "measured at commit 00a0bd7, before the oracle changes of 5ea34e6"
+# which code the controller x IK run measured (docs/libero.md)
+CONTROLLERS_IK_WHEN = "commit 36d0dc8, the same oracle as the shipped run"
 RUNS = {
     "oracle-shipped": "shipped init states (the paper's protocol: all 50 per task), default controller and IK",
     "oracle-sampled": "sampled layouts, reporting seeds 90000-90004 (5 per task)",
