@@ -123,15 +123,25 @@ def compose(ctx: OracleContext, goal: list[list[str]]) -> list[LiberoSkill]:
                                                                     point=spot), ["aside", place.obj]))
     # an object standing where the hand must go to grasp a goal object (a milk carton beside the cream cheese)
     # is set aside first too
+    destinations = {_destination_object(ctx, p.dest.target) for p in places}
     for place in places:
         for blocker, keep_clear in _grasp_blockers(ctx, place):
-            if blocker in [p.obj for p in places] or any(a.obj == blocker for a in asides):
-                continue
+            if (blocker in [p.obj for p in places] or blocker in destinations
+                    or any(a.obj == blocker for a in asides)):
+                continue  # goal objects are moved by their own steps; a destination stays where it is
             spot = _aside_spot(ctx, blocker, None, keep_clear=keep_clear)
             if spot is not None:
                 asides.append(PickPlace(ctx, blocker, Destination(relation="aside", target=None, is_site=False,
                                                                   point=spot), ["aside", blocker]))
     return switches + asides + opens_needed + early_opens + places + late_opens + closes
+
+
+def _destination_object(ctx: OracleContext, target: str | None) -> str | None:
+    """The object a destination belongs to: the object itself, or the owner of a region site (the basket of
+    ``basket_1_contain_region``)."""
+    if target is None or target in ctx.env.objects_dict:
+        return target
+    return getattr(ctx.env.object_states_dict.get(target), "parent_name", None)
 
 
 def _grasp_blockers(ctx: OracleContext, place: PickPlace) -> list[tuple[str, np.ndarray]]:
@@ -177,8 +187,11 @@ def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint | None, *,
     tops = obstacles.centre[:, 2] + ext[:, 2]
     # the hand puts it down the way it picks it up: its closed hand, shifted with the object, must fit there too
     # (next to the cabinet the hand stopped 19 cm up and the bowl fell)
-    grasp = PickPlace(ctx, obj, Destination(relation="aside", target=None, is_site=False, point=origin), []).grasp(
-        ctx.world, [])
+    try:
+        grasp = PickPlace(ctx, obj, Destination(relation="aside", target=None, is_site=False, point=origin),
+                          []).grasp(ctx.world, [])
+    except PlanningError:  # nothing the hand can hold it by: it is not set aside
+        return None
     hand = hand_points(grasp.pos + np.array([0.0, 0.0, RELEASE_GAP_M]), grasp.rot, closed=True)
     best = None
     for radius in (0.10, 0.15, 0.20, 0.25):
