@@ -207,6 +207,20 @@ def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, suc
         raise PlanningError(f"planner output success probability {success_prob} is outside [0, 1]")
 
 
+def canonical_hand(R: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) world TCP orientations, each replaced by the same parallel-jaw grasp turned 180 degrees about its
+    approach axis (x and y columns negated) when its yaw from the home hand lies outside the range the LIBERO oracle
+    keeps, (YAW_MIN - 180, YAW_MIN] degrees (docs/libero-oracle.md: the other half trips joint 7's tracking
+    reflex). The rotation head is trained up to that symmetry, so either of the two may come out."""
+    from tcot_hybrid.libero.grasps import YAW_MIN_RAD
+
+    R = np.array(R, dtype=float)
+    yaw = np.arctan2(R[:, 0, 1], -R[:, 1, 1])  # yaw_from_home: the closing (y) axis from the home hand's -y
+    flip = (yaw > YAW_MIN_RAD) | (yaw <= YAW_MIN_RAD - np.pi)
+    R[flip, :, :2] *= -1.0
+    return R
+
+
 class NetworkPlanner(Planner):
     """Shared part of the learned and direct planners: checkpoint, input checks, one forward pass."""
 
@@ -306,14 +320,16 @@ class LearnedPlanner(NetworkPlanner):
                            tcp_rot=tcp_rot)
 
     def orientations(self, rot6: np.ndarray) -> np.ndarray:
-        """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs."""
+        """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs, each turned 180
+        degrees about its approach axis when that brings the hand's yaw into the oracle's range (the network is
+        trained up to that parallel-jaw symmetry; :func:`canonical_hand`)."""
         from tcot_hybrid.learning.model import rot6_to_matrix
 
         try:
             R_cam = rot6_to_matrix(rot6)
         except ValueError as exc:
             raise PlanningError(f"planner orientation output cannot be made a rotation: {exc}") from exc
-        return self.R_world_cam @ R_cam
+        return canonical_hand(self.R_world_cam @ R_cam)
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""
