@@ -152,8 +152,11 @@ def eval_lines() -> list[str]:
     hows = []
     for label, name, eps in runs:
         r = json.loads((HERE / name / "eval.json").read_text()) if (HERE / name / "eval.json").is_file() else None
+        whole = r is not None and r["ran_now"] == r["episodes"] == len(eps)
         hows.append(f"{label}: `docs/libero-planner/{name}/`, {len(eps)} episodes, "
-                    + (f"{r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers" if r
+                    + (f"{r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers" if whole
+                       else f"over several runs, the last {r['ran_now']} episodes in {r['wall_time_s'] / 60:.1f} min "
+                            f"wall with {r['workers']} workers" if r
                        else "stopped before it finished: the episodes it completed"))
     lines = [f"**Learned planner, shipped init states {seeds[0]}-{seeds[-1]} of every task** ({'; '.join(hows)}), "
              f"beside the oracle on the same init states (`docs/eval-libero/oracle-shipped/`):", "",
