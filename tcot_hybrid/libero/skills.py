@@ -42,6 +42,8 @@ GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves t
 SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is dragged out from under something
 SLIDE_MAX_M = 0.10  # [m] furthest such a drag
 SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
+SIDE_GRASP_COS = 0.7  # a hand whose approach points less than ~45 degrees below horizontal is a side grasp
+VIEW_MARGIN_PX = 2.0  # [px] every waypoint this far inside the planner camera's image border
 
 
 def kf(p, closed: bool, rot=None) -> Keyframe:
@@ -88,9 +90,10 @@ class OracleContext:
         self.camera = getattr(task, "planner_camera", None) or "agentview"
         self.image_px = int(getattr(task, "planner_image_px", None) or 128)
         self._camera_model = None
+        self._reach = None  # (ReachSolver, T_base_world), built on first use
 
     # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
-    def in_view(self, p, *, margin_px: float = 2.0) -> bool:
+    def in_view(self, p, *, margin_px: float = VIEW_MARGIN_PX) -> bool:
         """Whether world point ``p`` projects inside the planner camera's image, ``margin_px`` from its border
         (the same camera model the planner projects plans with)."""
         if self._camera_model is None:
@@ -104,6 +107,46 @@ class OracleContext:
         uv, depth = self._camera_model.project(np.asarray(p, float)[None])
         return bool(depth[0] > 0 and self._camera_model.in_image(uv, margin_px=margin_px)[0])
 
+    # -- the arm: a plan whose poses it cannot reach is no plan ------------------------------------------
+    def reachable(self, poses) -> bool:
+        """Whether the arm follows the hand from where it is now through every (position, rotation) of
+        ``poses`` [world], as the executor does: along the straight, slerped path between them in the
+        planner's steps (4 cm, 0.3 rad), each IK solve seeded from the previous one. A pose reachable only
+        from another IK branch does not count: the arm, walked there from home, ended with joint 5 on its
+        limit and stalled 17 cm short (a bottle held sideways, lifted over the wine rack). True when the task
+        carries no robot."""
+        robot = getattr(self.task, "robot", None)
+        if robot is None:
+            return True
+        from scipy.spatial.transform import Rotation, Slerp
+
+        from tcot_hybrid.ik import IKConfig, IKTarget, make_ik
+        from tcot_hybrid.planners.oracle import OracleConfig
+        from tcot_hybrid.robot_check import REACH_TOL_M, REACH_TOL_RAD
+        from tcot_hybrid.sim import base_transform
+
+        if self._reach is None:
+            self._reach = (make_ik("pinocchio", robot, IKConfig()),
+                           np.linalg.inv(base_transform(robot, self.model, self.data)))
+        ik, T = self._reach
+        step = OracleConfig()
+        q = np.array([self.data.qpos[self.model.jnt_qposadr[self.model.joint(j).id]] for j in robot.arm_joints])
+        prev = (self.world.tcp_pos(), self.world.tcp_rot())
+        for pos, rot in poses:
+            pos, rot = np.asarray(pos, float), np.asarray(rot, float)
+            turn = float(np.linalg.norm((Rotation.from_matrix(rot) * Rotation.from_matrix(prev[1]).inv()).as_rotvec()))
+            n = max(1, int(np.ceil(max(np.linalg.norm(pos - prev[0]) / step.spacing_m, turn / step.rot_spacing_rad))))
+            slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([prev[1], rot])))
+            for f in np.arange(1, n + 1) / n:
+                p = prev[0] + (pos - prev[0]) * f
+                R = slerp(f).as_matrix()
+                res = ik.solve(IKTarget(pos=T[:3, :3] @ p + T[:3, 3], rot=T[:3, :3] @ R), q)
+                if res.pos_err > REACH_TOL_M or res.rot_err > REACH_TOL_RAD:
+                    return False
+                q = res.q
+            prev = (pos, rot)
+        return True
+
     def into_view(self, p, z_floor: float) -> np.ndarray:
         """``p`` lowered (not below ``z_floor``) until the planner camera sees it; unchanged if it already
         does or if no height down to the floor helps."""
@@ -112,7 +155,7 @@ class OracleContext:
             return p
         for z in np.arange(p[2] - 0.01, z_floor - 1e-9, -0.01):
             q = np.array([p[0], p[1], z])
-            if self.in_view(q, margin_px=0.5):
+            if self.in_view(q):  # the same margin the plan is judged by (a lift 1 px inside hid the plan)
                 return q
         return p
 
@@ -347,10 +390,11 @@ class PickPlace(LiberoSkill):
         best = self.grasp(world, effects)
         # plans live in the planner camera's pixels: a grasp whose lift or carry leaves the view (a wine bottle
         # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view
+        # and so does one the arm cannot reach (a bottle held sideways, lifted over the wine rack)
         first = None
         for g in [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]:
             out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
-            if not out["hidden"]:
+            if not out["hidden"] and ctx.reachable(self._key_poses(out)):
                 return out
             first = first or out
         return first
@@ -410,6 +454,14 @@ class PickPlace(LiberoSkill):
                    obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
                    hidden=bool(best[0][0]) or not ctx.in_view(lift))
         return out
+
+    @staticmethod
+    def _key_poses(p: dict) -> list:
+        """The plan's poses that decide whether the arm reaches it: pre-grasp, grasp, lift, above and at the
+        release."""
+        g, R, Rp, rel = p["grasp_pos"], p["grasp_rot"], p["release_rot"], p["release"]
+        return [(g - R[:, 2] * APPROACH_DZ, R), (g, R), (p["lift"], R),
+                (np.array([rel[0], rel[1], max(p["carry_floor"], rel[2] + 0.03)]), Rp), (rel, Rp)]
 
     def _slide_out(self, g_pos, g_rot, rel_c, rel_R, obj_boxes: Boxes, obstacles: Boxes) -> np.ndarray | None:
         """Where to drag the grasped object (TCP position, raised SLIDE_RAISE_M) before lifting it, when a
@@ -539,6 +591,20 @@ class PickPlace(LiberoSkill):
         for off in offsets:
             yield centre[:2] + R[:2, :2] @ off, best_yaw
 
+    def _retreat(self, release, R_place, carry_z: float) -> np.ndarray:
+        """Where the open hand goes after the release: up for a hand from above; for a side grasp, back out
+        along its approach axis first (rising with the fingers round a bottle's neck lifts it off the rack,
+        and above the rack top the planner camera no longer sees the hand)."""
+        ctx = self.ctx
+        approach = R_place[:, 2]
+        if approach[2] < -SIDE_GRASP_COS:
+            return ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
+        for dist in (LIFT_M, 0.09, 0.06):
+            p = release - approach * dist
+            if ctx.in_view(p):
+                return p
+        return release - approach * 0.06
+
     def _keyframes(self, world: World) -> list[Keyframe]:
         ctx = self.ctx
         p = self._plan(world)
@@ -567,8 +633,7 @@ class PickPlace(LiberoSkill):
                 kf(release + np.array([0, 0, 0.03]), True, R_place),
                 kf(release, True, R_place),
                 kf(release, False, R_place)]
-        up = ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
-        kfs.append(kf(up, False, R_place))
+        kfs.append(kf(self._retreat(release, R_place, carry_z), False, R_place))
         if not p["held"]:
             kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
             # the way in: when the straight way from home (or from where the hand is) would hit something, the
