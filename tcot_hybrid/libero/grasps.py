@@ -113,12 +113,17 @@ def _ring(obj: Boxes):
     ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
     tops = obj.centre[:, 2] + ext[:, 2]
     top = tops.max()
-    radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
-    ring = (tops >= top - 0.02) & (radial >= 0.35 * radial.max())
-    if not ring.any():
-        return np.zeros(0, int), centre, tops, top
-    r_ring = float(np.median(radial[ring]))
-    ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+    high = tops >= top - 0.02
+    ring = np.zeros(len(obj), bool)
+    for _ in range(2):  # the bounding box's centre is off the ring's by half a handle: re-centre on the ring
+        radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
+        ring = high & (radial >= 0.35 * radial.max())
+        if not ring.any():
+            return np.zeros(0, int), centre, tops, top
+        r_ring = float(np.median(radial[ring]))
+        ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+        if ring.sum() >= 3:
+            centre = np.append(obj.centre[ring, :2].mean(axis=0), centre[2])
     return np.flatnonzero(ring), centre, tops, top
 
 

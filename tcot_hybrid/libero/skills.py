@@ -467,13 +467,20 @@ class PickPlace(LiberoSkill):
         cavity only a level hand fits through the opening, so there every level grasp, best first."""
         pool = [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]
         if self._cavity(effects, self.ctx.obstacles(effects, exclude=(self.obj,))) is not None:
-            level = [g for g in self.last_grasps if abs(g.rot[2, 2]) < LEVEL_APPROACH_MAX_Z]
-            pool = [g for g in level if g.collisions <= min(h.collisions for h in level)] if level else pool
+            level = [g for g in self.last_grasps if abs(g.rot[2, 2]) < LEVEL_APPROACH_MAX_Z and all(g is not p for p in pool)]
+            pool += [g for g in level if g.collisions <= min(h.collisions for h in level)] if level else []
         return pool
 
     def first_grasp(self, world: World, effects) -> Grasp:
-        """The grasp a plan tries first (what a blocker standing in the hand's way is judged against)."""
-        return self._grasp_pool(self.grasp(world, effects), effects)[0]
+        """The first grasp whose plan takes the object there and stays in view, before the arm's reach is
+        checked (what a blocker standing in the hand's way is judged against: a mug behind the handle the
+        hand must take to carry another mug into the microwave)."""
+        pool = self._grasp_pool(self.grasp(world, effects), effects)
+        obj_pos = self.ctx.point_after(world.pos(self.obj), int(self.ctx.bodies[self.obj][0]), effects)
+        for g in pool:
+            if not self._plan_with(world, effects, False, obj_pos, g.pos, g.rot)["hidden"]:
+                return g
+        return pool[0]
 
     def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
         ctx = self.ctx
@@ -484,11 +491,8 @@ class PickPlace(LiberoSkill):
         rel_origin = g_rot.T @ (obj_pos - g_pos)
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         start = world.tcp_pos() if held else g_pos
-        cavity = self._cavity(effects, obstacles)
-        best = None if cavity is None else self._place_in_cavity(cavity, obj_boxes, rel_c, rel_R, rel_origin, g_rot,
-                                                                 obstacles, start)
-        for place_xy, yaw in ([] if cavity is not None else
-                              self._place_candidates(world, effects, obj_boxes, obj_pos)):
+        best = None
+        for place_xy, yaw in self._place_candidates(world, effects, obj_boxes, obj_pos):
             R_place = rot_z(yaw) @ g_rot
             tcp_xy = place_xy - (R_place @ rel_origin)[:2]
 
@@ -522,6 +526,13 @@ class PickPlace(LiberoSkill):
             if best is None or key < best[0]:
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
+        cavity = self._cavity(effects, obstacles)
+        if cavity is not None:
+            # lowered from above, the object stops on the cavity's ceiling (a mug on top of the microwave):
+            # then it goes in through the opening, level, or this grasp cannot take it there
+            bottom = best[1]["release"][2] - best[1]["obj_below_tcp"]
+            if bottom > cavity[0][2] + cavity[3][2]:
+                best = self._place_in_cavity(cavity, obj_boxes, rel_c, rel_R, rel_origin, g_rot, obstacles, start)
         if best is None:  # no way into the cavity with this grasp: the next grasp is tried
             return dict(held=held, grasp_pos=g_pos, grasp_rot=g_rot, hidden=True, blocked=True)
         out = best[1]
