@@ -106,8 +106,10 @@ def family(category: str) -> str:
     return "rim" if any(w in c for w in RIM_WORDS) else "top"
 
 
-def _ring(obj: Boxes):
-    """The object's top ring: (indices of its boxes, the object's centre, each box's top, the ring's top)."""
+def _ring(obj: Boxes, *, recentre: bool = False):
+    """The object's top ring: (indices of its boxes, the object's centre, each box's top, the ring's top).
+    ``recentre``: centre on the ring's boxes rather than the bounding box (a handle shifts the box's centre by
+    half its length; a tilted bowl's highest boxes, all on one side, would shift the ring's instead)."""
     lo, hi = obj.aabb()
     centre = (lo + hi) / 2
     ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
@@ -115,14 +117,14 @@ def _ring(obj: Boxes):
     top = tops.max()
     high = tops >= top - 0.02
     ring = np.zeros(len(obj), bool)
-    for _ in range(2):  # the bounding box's centre is off the ring's by half a handle: re-centre on the ring
+    for _ in range(2 if recentre else 1):
         radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
         ring = high & (radial >= 0.35 * radial.max())
         if not ring.any():
             return np.zeros(0, int), centre, tops, top
         r_ring = float(np.median(radial[ring]))
         ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
-        if ring.sum() >= 3:
+        if recentre and ring.sum() >= 3:
             centre = np.append(obj.centre[ring, :2].mean(axis=0), centre[2])
     return np.flatnonzero(ring), centre, tops, top
 
@@ -149,7 +151,7 @@ def handle_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     outermost bar at its middle. A level hand is 6.4 cm tall and holds the mug ahead of it, so it carries a mug
     into a cavity a top-down hand cannot enter (the microwave: 14.4 cm tall, the mug 10.3 cm); a level pinch on
     the rim cannot, since the inner finger, straight and 5 cm long, would cross the curved wall."""
-    ring, centre, _, _ = _ring(obj)
+    ring, centre, _, _ = _ring(obj, recentre=True)
     if len(ring) == 0:
         return []
     radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
