@@ -170,8 +170,11 @@ class OracleContext:
             arm = SimpleNamespace(
                 qpos=np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.arm_joints]),
                 data=mujoco.MjData(m), link_geoms=np.isin(m.geom_bodyid, list(links)))
+            arm.data.qpos[:] = self.data.qpos
+            # on the scratch state: kinematics run on the live state changed what the controller read before
+            # the next step by 1e-14, and the episode drifted onto another outcome
             self._reach = (make_ik("pinocchio", robot, IKConfig()),
-                           np.linalg.inv(base_transform(robot, m, self.data)), arm)
+                           np.linalg.inv(base_transform(robot, m, arm.data)), arm)
         return self._reach
 
     def _arm_scene(self, arm, effects) -> None:
