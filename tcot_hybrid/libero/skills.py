@@ -45,7 +45,7 @@ SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is d
 SLIDE_MAX_M = 0.10  # [m] furthest such a drag
 SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
 SIDE_GRASP_COS = 0.7  # a hand whose approach points less than ~45 degrees below horizontal is a side grasp
-VIEW_MARGIN_PX = 2.0
+VIEW_MARGIN_PX = 0.5  # [px] every waypoint this far inside the planner camera's image (the executor's margin: 0)
 LEVEL_APPROACH_MAX_Z = 0.35  # a grasp whose approach axis is this close to level carries into a cavity
 CAVITY_CEILING_M = 0.25  # [m] a region with something this low above its floor is a cavity (a microwave)
 CAVITY_ENTRY_M = 0.03  # [m] the carried object starts its way in this far outside the opening
@@ -453,13 +453,18 @@ class PickPlace(LiberoSkill):
         # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view
         # and so does one the arm cannot reach (a bottle held sideways, lifted over the wine rack)
         pool = self._grasp_pool(best, effects)
-        first = None
+        first = visible = None
         for g in pool:
             out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
             if not out["hidden"] and ctx.reachable(self._key_poses(out), moving=self.obj, effects=effects):
                 return out
             if not out.get("blocked"):
                 first = first or out
+                visible = visible or (None if out["hidden"] else out)
+        # none both in view and judged within reach: the first one in view still runs (the reach check walks
+        # one IK branch; the executor got to the bowl by the plate in layouts where that walk did not), and a
+        # plan out of view only when there is no other (the executor refuses it)
+        first = visible or first
         if first is None:
             raise PlanningError(f"oracle: no grasp of {self.obj!r} carries it into {self.dest.target!r} "
                                 f"({len(pool)} grasps tried: the hand or the object hits the opening's edges)")
