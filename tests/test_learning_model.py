@@ -169,3 +169,33 @@ def test_rot6_round_trip_and_gram_schmidt():
         rot6_to_matrix(np.array([1.0, 0, 0, 2.0, 0, 0]))
     with pytest.raises(ValueError, match="not finite"):
         rot6_to_matrix(np.array([np.nan, 0, 0, 0, 1, 0]))
+
+
+def test_orientation_loss_and_error_respect_the_parallel_jaw_symmetry():
+    """A hand turned 180 degrees about its approach axis is the same grasp: the loss and the validation error of a
+    prediction are the same against either label, and the loss stays a real distance otherwise."""
+    from scipy.spatial.transform import Rotation
+
+    from tcot_hybrid.learning.losses import trajectory_loss
+    from tcot_hybrid.learning.model import matrix_to_rot6
+    from tcot_hybrid.learning.validation import rotation_error_deg
+
+    R = Rotation.random(8, random_state=0).as_matrix()
+    turn = Rotation.from_rotvec([0.0, 0.0, 0.3]).as_matrix()  # 17 degrees about the approach axis
+    pred, lab = matrix_to_rot6(R @ turn), matrix_to_rot6(R)
+    flipped = matrix_to_rot6(R @ np.diag([-1.0, -1.0, 1.0]))
+    np.testing.assert_allclose(rotation_error_deg(pred, lab), np.degrees(0.3), atol=1e-6)
+    np.testing.assert_allclose(rotation_error_deg(pred, flipped), np.degrees(0.3), atol=1e-6)
+    np.testing.assert_allclose(rotation_error_deg(matrix_to_rot6(R @ Rotation.from_rotvec([0, 0, 2.5]).as_matrix()), lab),
+                               np.degrees(np.pi - 2.5), atol=1e-6)  # at most 90 degrees about the approach axis
+
+    def loss(label):
+        n = 8
+        out = {"uv_px": torch.zeros(1, n, 2), "z_m": torch.zeros(1, n), "grip_logit": torch.zeros(1, n),
+               "success_logit": torch.zeros(1), "rot6": torch.from_numpy(pred).float()[None]}
+        b = {"mode": torch.zeros(1, dtype=torch.long), "uv": torch.zeros(1, n, 2), "z": torch.zeros(1, n),
+             "grip": torch.zeros(1, n), "success": torch.zeros(1), "rot": torch.from_numpy(label).float()[None]}
+        return trajectory_loss(out, b, n // 2)[1]["rot"].item()  # global prompt: the first half
+
+    assert loss(flipped) == pytest.approx(loss(lab)) and loss(lab) > 0.5
+    assert loss(matrix_to_rot6(R @ Rotation.from_rotvec([1.0, 0, 0]).as_matrix())) > loss(lab)  # a tilt is an error

@@ -22,8 +22,10 @@ from tcot_hybrid.planners.learned import (  # noqa: E402
     LearnedPlannerConfig,
     align_gripper_switches,
     align_switches_to_dwells,
+    canonical_hand,
     check_outputs,
     height_plan,
+    lowest_plan_height,
 )
 from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.robot import load_robot_spec  # noqa: E402
@@ -372,9 +374,9 @@ def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_p
     monkeypatch.setattr(p.model, "forward", fixed)
     g = p.plan(_obs(), mode="global")
     np.testing.assert_allclose(camera.unproject(g.uv_px, g.depth_m)[:, 2], 0.3, atol=1e-5)
-    np.testing.assert_allclose(g.tcp_rot, camera.T_world_cam[:3, :3] @ R_cam[25:51], atol=1e-5)
+    np.testing.assert_allclose(g.tcp_rot, canonical_hand(camera.T_world_cam[:3, :3] @ R_cam[25:51]), atol=1e-5)
     loc = p.plan(_obs(), mode="local")
-    np.testing.assert_allclose(loc.tcp_rot, camera.T_world_cam[:3, :3] @ R_cam[51:], atol=1e-5)
+    np.testing.assert_allclose(loc.tcp_rot, canonical_hand(camera.T_world_cam[:3, :3] @ R_cam[51:]), atol=1e-5)
 
     def degenerate(*a, **k):
         out = fixed(*a, **k)
@@ -388,3 +390,43 @@ def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_p
 
 def test_workcell_plans_stay_top_down(planner):
     assert planner.plan(_obs(), mode="global").tcp_rot is None
+
+
+def test_orientations_are_brought_into_the_oracles_yaw_range_by_the_parallel_jaw_symmetry():
+    """The rotation head is trained up to the 180-degree turn about the approach axis; the plan carries the one of
+    the two equivalent hands whose yaw lies in the oracle's range, tilted hands included."""
+    from scipy.spatial.transform import Rotation
+
+    from tcot_hybrid.libero.grasps import YAW_MIN_RAD, top_down, yaw_from_home
+
+    for deg in range(-175, 180, 10):
+        a = np.deg2rad(deg)
+        R = top_down([np.cos(a), np.sin(a)])  # the oracle's choice of the two
+        flipped = R @ np.diag([-1.0, -1.0, 1.0])
+        np.testing.assert_allclose(canonical_hand(np.stack([R, flipped])), np.stack([R, R]), atol=1e-12)
+    R = Rotation.random(200, random_state=3).as_matrix()
+    out = canonical_hand(R)
+    for r, o in zip(R, out):
+        assert np.allclose(o, r) or np.allclose(o, r @ np.diag([-1.0, -1.0, 1.0]))  # same grasp
+        assert YAW_MIN_RAD - np.pi - 1e-9 <= yaw_from_home(o) <= YAW_MIN_RAD + 1e-9
+        np.testing.assert_allclose(o[:, 2], r[:, 2])  # the approach axis is kept
+
+
+def test_camera_referenced_checkpoints_bound_heights_from_their_demonstrations(camera):
+    """learned.min_height_m on a height_ref: camera checkpoint counts from the lowest TCP height its demonstrations
+    reached under the nearest training camera (tables stand at different heights); world checkpoints keep z = 0."""
+    cam_pos = np.asarray(camera.T_world_cam)[:3, 3]
+    far = (cam_pos + [0.5, 0.0, 0.0]).tolist()
+    meta = {"height_ref": "camera", "lowest_tcp_by_camera": [
+        {"camera_pos_m": (cam_pos + [0.03, 0.0, 0.0]).tolist(), "lowest_z_m": -0.40},  # this camera, shifted 3 cm
+        {"camera_pos_m": far, "lowest_z_m": -0.90}]}
+    z, note = lowest_plan_height(meta, camera, -0.02)
+    assert z == pytest.approx(cam_pos[2] - 0.40 - 0.02) and "under this camera" in note
+    z, note = lowest_plan_height({**meta, "lowest_tcp_by_camera": meta["lowest_tcp_by_camera"][1:]}, camera, -0.02)
+    assert z == pytest.approx(cam_pos[2] - 0.90 - 0.02) and "none within 10 cm" in note  # unknown camera: loosest
+    assert lowest_plan_height({"height_ref": "world"}, camera, -0.02) == (-0.02, "learned.min_height_m; table top at 0")
+    assert lowest_plan_height({"height_ref": "camera"}, camera, -0.03)[0] == -0.03  # written before the record
+    with pytest.raises(PlanningError, match=r"waypoint 0 has TCP height z_m = 0.3000 m.*lowest allowed 0.3800 m "
+                                            r"\(learned.min_height_m -0.02 m from the lowest TCP height"):
+        check_outputs(np.zeros((1, 2)), np.array([0.3]), np.array([0.5]), min_height_m=0.38,
+                      floor_note=lowest_plan_height(meta, camera, -0.02)[1])

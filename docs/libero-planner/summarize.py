@@ -1,10 +1,14 @@
 """Summarise the LIBERO learned planner (docs/libero-planner.md) from what the commands below wrote, into the
 <!-- libero-planner:start/end --> sections of docs/libero-planner.md and README.md:
 
-    make libero-planner        # collection + training: docs/libero-planner/collect.log, train.log,
-                               # train.metrics.jsonl, tcot_hybrid/checkpoints/libero_panda_default.*
+    make libero-planner        # collection + two training runs: docs/libero-planner/collect.log, train.log,
+                               # train.metrics.jsonl, train_finetune.*, heldout-first.json, heldout.json,
+                               # tcot_hybrid/checkpoints/libero_panda_default.*
     make libero-planner-eval   # tcot eval, shipped init states: docs/libero-planner/eval-shipped/
     .venv/bin/python docs/libero-planner/summarize.py
+
+docs/libero-planner/eval-shipped-first/ is the same evaluation of the first checkpoint (the first training run alone,
+read out around the heatmap's peak), kept beside it.
 """
 from __future__ import annotations
 
@@ -12,6 +16,8 @@ import json
 import re
 from collections import defaultdict
 from pathlib import Path
+
+import yaml
 
 from tcot_hybrid.markdown import update_readme_section
 from tcot_hybrid.metrics import wilson_interval
@@ -47,17 +53,29 @@ def build_lines() -> list[str]:
                      f"{float(wall) / 60:.1f} min wall with 2 workers on 2 shared cores, a planner image every 3rd "
                      f"step; {failed} unsuccessful (kept, never imitated), {crashed} crashed; {mib} MiB; "
                      f"{ntr} training / {nva} validation demos (split by seed).")
-    train_log = HERE / "train.log"
-    tm = re.search(r"total time ([\d.]+) min", train_log.read_text()) if train_log.is_file() else None
-    epochs = [json.loads(x) for x in (HERE / "train.metrics.jsonl").read_text().splitlines() if x.strip()] \
-        if (HERE / "train.metrics.jsonl").is_file() else []
-    lines.append(f"- **Training** (`docs/libero-planner/train.log`, `train.metrics.jsonl`): {meta['train_demos']} "
-                 f"demos / {meta['train_frames']} frames, {len(epochs)} epochs (best {meta['metrics']['best_epoch']}) "
-                 f"of at most {tc['max_epochs']}, cap {tc['max_minutes']} min"
-                 + (f", {float(tm.group(1)):.1f} min wall (loading, training, validation, saving)" if tm else "")
-                 + f"; checkpoint {size_mb:.1f} MB (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`).")
+    runs = [("train", "examples/configs/train_libero.yaml")]
+    if tc.get("init"):
+        runs.append(("train_finetune", "examples/configs/train_libero_finetune.yaml"))
+    total = 0.0
+    for i, (name, config) in enumerate(runs):
+        log_p, met_p = HERE / f"{name}.log", HERE / f"{name}.metrics.jsonl"
+        tm = re.search(r"total time ([\d.]+) min", log_p.read_text()) if log_p.is_file() else None
+        epochs = [json.loads(x) for x in met_p.read_text().splitlines() if x.strip()] if met_p.is_file() else []
+        cfg = yaml.safe_load((ROOT / config).read_text())
+        best = min(epochs, key=lambda e: e["score"])["epoch"] if epochs else "?"
+        total += float(tm.group(1)) if tm else 0.0
+        lines.append(f"- **Training run {i + 1}** (`{config}`; `docs/libero-planner/{name}.log`, `{name}.metrics.jsonl`)"
+                     + (f", from run {i}'s weights" if i else "")
+                     + f": {len(epochs)} epochs (best {best}) of at most {cfg['max_epochs']}, peak lr {cfg['lr']}, cap "
+                     f"{cfg['max_minutes']} min" + (f", {float(tm.group(1)):.1f} min wall (loading, training, "
+                                                     f"validation, saving)" if tm else "") + ".")
+    lines.append(f"- **Shipped checkpoint** (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`, {size_mb:.1f} MB): "
+                 f"the last run's best epoch; {meta['train_demos']} training demos / {meta['train_frames']} frames; "
+                 f"{total:.1f} min of training in all; heatmap read-out radius "
+                 f"{meta['train_config']['model']['readout_radius_cells']} cells.")
     v = meta["metrics"]
-    lines += ["", "Held-out validation (seeds ≡ 0 mod 10; executed points only: global k ≥ 0, all local; median / p90):",
+    lines += ["", "Held-out validation (seeds ≡ 0 mod 10; executed points only: global k ≥ 0, all local; median / p90; "
+              "orientation up to the parallel-jaw symmetry):",
               "", "| prompt | pixel [px] | 3D [cm] | height [cm] | orientation [deg] | gripper bit |", "|---|---|---|---|---|---|"]
     for name in ("global", "local"):
         lines.append(f"| {name} | {v[f'{name}_px_median']:.2f} / {v[f'{name}_px_p90']:.2f} | "
@@ -68,23 +86,61 @@ def build_lines() -> list[str]:
     lines.append(f"| global at t = 0 | {v['global_t0_px_median']:.2f} / {v['global_t0_px_p90']:.2f} | "
                  f"{v['global_t0_3d_cm_median']:.2f} / {v['global_t0_3d_cm_p90']:.2f} | - | - | {v['global_t0_grip_acc']:.3f} |")
     lines += ["", f"Failure detection on the same frames: AUROC {v['success_auroc']:.3f}, accuracy {v['success_acc']:.3f}."]
+    return lines + heldout_lines()
+
+
+def heldout_lines() -> list[str]:
+    """The read-out comparison and the per-suite breakdown (docs/libero-planner/heldout.py)."""
+    rows = [(label, json.loads(p.read_text())) for label, p in (("first run", HERE / "heldout-first.json"),
+                                                                 ("shipped", HERE / "heldout.json")) if p.is_file()]
+    if not rows:
+        return []
+    lines = ["", "By heatmap read-out (`docs/libero-planner/heldout.py` → `heldout-first.json`, `heldout.json`; median "
+             "errors; *first grasp*: the t = 0 global plan's first waypoint whose labelled gripper bit is closed):", "",
+             "| checkpoint | read-out | global px | global t = 0 px | local px | 3D t = 0 [cm] | orientation [deg] | "
+             "first grasp px | first grasp within 5 px / over 20 px |", "|---|---|---|---|---|---|---|---|---|"]
+    for label, r in rows:
+        for rad, v in sorted(r["by_readout"].items(), key=lambda kv: -int(kv[0])):
+            what = "whole map" if rad == "0" else f"{rad} cells around the peak"
+            lines.append(f"| {label} | {what} | {v['global_px_median']:.2f} | {v['global_t0_px_median']:.2f} | "
+                         f"{v['local_px_median']:.2f} | {v['global_t0_3d_cm_median']:.2f} | "
+                         f"{v['global_rot_deg_median']:.1f} | {v['t0_first_grasp_px_median']:.2f} | "
+                         f"{v['t0_first_grasp_within_5px']:.2f} / {v['t0_first_grasp_over_20px']:.2f} |")
+    label, r = rows[-1]
+    rad = str(r["shipped_readout_radius_cells"])
+    ps = r["by_readout"].get(rad)
+    if ps:
+        lines += ["", f"Per suite ({label}, its own read-out; medians; first grasp as above):", "",
+                  "| suite | t = 0 plans | global px | global t = 0 px | first grasp px | first grasp within 5 px |",
+                  "|---|---|---|---|---|---|"]
+        for s in SUITES:
+            x = ps["per_suite"][s]
+            fg = "-" if x["t0_first_grasp_px_median"] is None else f"{x['t0_first_grasp_px_median']:.2f}"
+            w5 = "-" if x["t0_first_grasp_within_5px"] is None else f"{x['t0_first_grasp_within_5px']:.2f}"
+            lines.append(f"| {s} | {x['plans_t0']} | {x['global_px_median']:.2f} | {x['global_t0_px_median']:.2f} | "
+                         f"{fg} | {w5} |")
     return lines
+
+
+EVALS = (("first checkpoint", "eval-shipped-first"), ("shipped checkpoint", "eval-shipped"))
+
+
+def _episodes(name: str) -> list[dict]:
+    p = HERE / name / "episodes.jsonl"
+    return [json.loads(x) for x in p.read_text().splitlines() if x.strip()] if p.is_file() else []
 
 
 def eval_lines() -> list[str]:
     """Success per suite and mode from the episodes `tcot eval` recorded (episodes.jsonl; eval.json adds the wall
-    time once the run has finished), beside the oracle on the same shipped init states."""
-    ep_path = HERE / "eval-shipped" / "episodes.jsonl"
-    if not ep_path.is_file():
+    time once the run has finished), for the first and the shipped checkpoint, beside the oracle on the same shipped
+    init states."""
+    runs = [(label, name, _episodes(name)) for label, name in EVALS]
+    runs = [r for r in runs if r[2]]
+    if not runs:
         return ["- not evaluated yet (`make libero-planner-eval`)"]
-    eps = [json.loads(x) for x in ep_path.read_text().splitlines() if x.strip()]
-    got: dict = defaultdict(lambda: [0, 0])
-    for e in eps:
-        got[(e["mode"], e["suite"])][0] += bool(e["success"])
-        got[(e["mode"], e["suite"])][1] += 1
-    seeds = sorted({e["seed"] for e in eps})
-    pairs = {(e["task"], e["seed"]) for e in eps}  # the oracle on exactly the same (task, init state) pairs
-    oracle: dict = defaultdict(lambda: [0, 0])
+    pairs = {(e["task"], e["seed"]) for _, _, eps in runs for e in eps}
+    seeds = sorted({e["seed"] for _, _, eps in runs for e in eps})
+    oracle: dict = defaultdict(lambda: [0, 0])  # the oracle on exactly the same (task, init state) pairs
     op = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
     if op.is_file():
         for line in op.read_text().splitlines():
@@ -93,32 +149,64 @@ def eval_lines() -> list[str]:
                 oracle[e["suite"]][0] += bool(e["success"])
                 oracle[e["suite"]][1] += 1
     order = ("global", "local", "glsr", "glsr_reset")
-    modes = sorted({m for m, _ in got}, key=lambda m: order.index(m) if m in order else len(order))
-    r = json.loads((HERE / "eval-shipped" / "eval.json").read_text()) if (HERE / "eval-shipped" / "eval.json").is_file() else None
-    how = (f"{r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers" if r
-           else "the run was stopped before it finished: these are the episodes it completed")
-    lines = [f"**Learned planner, shipped init states {seeds[0]}-{seeds[-1]} of every task** "
-             f"(`docs/libero-planner/eval-shipped/`, {len(eps)} episodes, {how}), beside the oracle on the same init "
-             f"states (`docs/eval-libero/oracle-shipped/`):", "",
+    hows = []
+    for label, name, eps in runs:
+        r = json.loads((HERE / name / "eval.json").read_text()) if (HERE / name / "eval.json").is_file() else None
+        hows.append(f"{label}: `docs/libero-planner/{name}/`, {len(eps)} episodes, "
+                    + (f"{r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers" if r
+                       else "stopped before it finished: the episodes it completed"))
+    lines = [f"**Learned planner, shipped init states {seeds[0]}-{seeds[-1]} of every task** ({'; '.join(hows)}), "
+             f"beside the oracle on the same init states (`docs/eval-libero/oracle-shipped/`):", "",
              "| planner | " + " | ".join(SUITES) + " | all four |", "|" + "---|" * (len(SUITES) + 2)]
-    for mode in modes:
-        k = sum(got[(mode, s)][0] for s in SUITES)
-        n = sum(got[(mode, s)][1] for s in SUITES)
-        lines.append(f"| learned, {mode} | " + " | ".join(rate(*got[(mode, s)]) for s in SUITES) + f" | {rate(k, n)} |")
+    for label, _, eps in runs:
+        got: dict = defaultdict(lambda: [0, 0])
+        for e in eps:
+            got[(e["mode"], e["suite"])][0] += bool(e["success"])
+            got[(e["mode"], e["suite"])][1] += 1
+        modes = sorted({m for m, _ in got}, key=lambda m: order.index(m) if m in order else len(order))
+        for mode in modes:
+            k = sum(got[(mode, s)][0] for s in SUITES)
+            n = sum(got[(mode, s)][1] for s in SUITES)
+            lines.append(f"| learned ({label}), {mode} | " + " | ".join(rate(*got[(mode, s)]) for s in SUITES)
+                         + f" | {rate(k, n)} |")
     if oracle:
         k = sum(oracle[s][0] for s in SUITES)
         n = sum(oracle[s][1] for s in SUITES)
         lines.append("| oracle (privileged) | " + " | ".join(rate(*oracle[s]) for s in SUITES) + f" | {rate(k, n)} |")
-    faults = sum(bool(e["fault"]) for e in eps)
-    viol = max(e["max_joint_limit_violation_rad"] for e in eps)
-    replans = [e["replans"] for e in eps if e["mode"] == "glsr"]
-    lines += ["", f"Worst joint-limit violation {viol:.4f} rad; faulted episodes {faults} (none counted as success)"
-              + (f"; GLSR replanned {sum(replans) / len(replans):.1f} times per episode on average." if replans else ".")]
+    lines.append("")
+    for label, _, eps in runs:
+        faults = sum(bool(e["fault"]) for e in eps)
+        viol = max(e["max_joint_limit_violation_rad"] for e in eps)
+        replans = [e["replans"] for e in eps if e["mode"] == "glsr"]
+        lines.append(f"- {label}: worst joint-limit violation {viol:.4f} rad; faulted episodes {faults} (none counted "
+                     "as success)" + (f"; GLSR replanned {sum(replans) / len(replans):.1f} times per episode on average."
+                                      if replans else "."))
     return lines
 
 
+def latency_lines() -> list[str]:
+    p = HERE / "latency.json"
+    if not p.is_file():
+        return ["- planner latency on LIBERO not measured yet (`python docs/libero-planner/latency.py`)"]
+    r = json.loads(p.read_text())
+    f = r["figures"]
+
+    def ms(key: str) -> str:
+        v = f[key]
+        return f"{v['median']:.2f} ({v['min']:.2f}-{v['max']:.2f})"
+    return [f"**Planner latency on LIBERO** (`docs/libero-planner/latency.py` → `latency.json`; shipped checkpoint, "
+            f"{r['image_px']} x {r['image_px']} px planner image, batch 1, {r['calls']} calls each, `{r['task']}` seed "
+            f"{r['seed']}; median (min-max) ms per call; load average {r['load_average_1min'][0]:.2f} → "
+            f"{r['load_average_1min'][1]:.2f} on {r['cpus']} shared cores):", "",
+            "| torch threads | global plan | local plan | success probability |", "|---|---|---|---|",
+            f"| 2 | {ms('planner_inference_ms/global')} | {ms('planner_inference_ms/local')} | "
+            f"{ms('planner_inference_ms/detect')} |",
+            f"| 1 | {ms('planner_inference_ms_1thread/global')} | {ms('planner_inference_ms_1thread/local')} | "
+            f"{ms('planner_inference_ms_1thread/detect')} |"]
+
+
 def main() -> None:
-    text = "\n".join(build_lines() + [""] + eval_lines()) + "\n"
+    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines()) + "\n"
     (HERE / "summary.md").write_text(text)
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-planner", text)

@@ -26,7 +26,11 @@ def trajectory_loss(out: dict, b: dict, n_global: int, *, heatmap_ce: float = 0.
     parts = {"px": l_px.sum() / traj.sum().clamp_min(1), "z_cm": l_z.sum() / traj.sum().clamp_min(1),
              "grip": l_gr.sum() / traj.sum().clamp_min(1), "detect": l_det.sum() / det.sum().clamp_min(1)}
     if "rot6" in out:  # orientation: the two columns' error in units of ROT_UNIT (~ that many rad of turn)
-        ro = F.smooth_l1_loss(out["rot6"] / ROT_UNIT, b["rot"] / ROT_UNIT, reduction="none", beta=1.0).sum(-1)
+        # parallel-jaw symmetry: the hand turned 180 degrees about its approach axis (x, y columns negated) is the
+        # same grasp, so the label is whichever of the two is nearer (no averaging of two equivalent answers)
+        pred, lab = out["rot6"] / ROT_UNIT, b["rot"] / ROT_UNIT
+        ro = torch.minimum(F.smooth_l1_loss(pred, lab, reduction="none", beta=1.0).sum(-1),
+                           F.smooth_l1_loss(pred, -lab, reduction="none", beta=1.0).sum(-1))
         l_rot = (ro * wmask).sum(1)
         total = total + l_rot
         parts["rot"] = l_rot.sum() / traj.sum().clamp_min(1)

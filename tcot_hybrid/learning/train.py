@@ -190,10 +190,25 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         "metrics": {"best_epoch": best_epoch, **best_metrics}, "train_config": _jsonable(cfg),
         "versions": versions(), "created_unix": int(time.time()),
     }
+    if cfg.height_ref == "camera":  # the planner's floor (learned.min_height_m) per training camera
+        meta["lowest_tcp_by_camera"] = lowest_tcp_by_camera(tr)
     save_checkpoint(out, model, meta)
     wall = time.perf_counter() - t_start
     log(f"wrote {out} (best epoch {best_epoch}) in {wall / 60:.1f} min")
     return TrainResult(checkpoint=out, metrics=best_metrics, epochs=epoch, wall_s=wall)
+
+
+def lowest_tcp_by_camera(frames) -> list[dict]:
+    """Per planner camera of ``frames`` (its position), the lowest labelled TCP height of its imitated frames (global
+    and local labels, measured like the network's heights): where ``learned.min_height_m`` is counted from on a
+    ``height_ref: camera`` checkpoint (:func:`tcot_hybrid.planners.learned.lowest_plan_height`)."""
+    out = []
+    for c in np.unique(frames.cam[frames.traj]):
+        sel = np.flatnonzero(frames.traj & (frames.cam == c))
+        low = min(float(frames.g_z.numpy()[sel].min()), float(frames.l_z.numpy()[sel].min()))
+        pos = np.asarray(frames.cameras[c].T_world_cam, dtype=float)[:3, 3]
+        out.append({"camera_pos_m": [round(float(x), 4) for x in pos], "lowest_z_m": round(low, 4)})
+    return out
 
 
 DETECT_SCORE_PX = 5.0  # stage 2 validation score: 1 - AUROC of the detector costs like this many px of error

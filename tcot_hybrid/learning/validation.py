@@ -57,12 +57,15 @@ def lift_frames(frames, rows: np.ndarray, uv: np.ndarray, z: np.ndarray, camera=
 
 
 def rotation_error_deg(rot6_pred: np.ndarray, rot6_true: np.ndarray) -> np.ndarray:
-    """Angle [deg] between predicted (made a rotation by Gram-Schmidt) and labelled orientations (both (..., 6))."""
+    """Angle [deg] between predicted (made a rotation by Gram-Schmidt) and labelled orientations (both (..., 6)),
+    up to the parallel-jaw symmetry: the labelled hand or the same hand turned 180 degrees about its approach
+    axis, whichever is nearer (at most 90 degrees of turn about that axis)."""
     from tcot_hybrid.learning.model import rot6_to_matrix
 
     Rp, Rt = rot6_to_matrix(rot6_pred), rot6_to_matrix(rot6_true)
     cos = (np.einsum("...ij,...ij->...", Rp, Rt) - 1.0) / 2.0
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    cos_flip = (np.einsum("...ij,...ij->...", Rp, Rt * np.array([-1.0, -1.0, 1.0])) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(np.maximum(cos, cos_flip), -1.0, 1.0)))
 
 
 def trajectory_metrics(model, frames, idx: np.ndarray, camera=None, *, n_global: int, center: int) -> dict:

@@ -57,9 +57,13 @@ class LearnedPlannerConfig:
                       timing, and event-spaced plans end every piece on its switch and show no dwells.
                       dwell_leave_m None = off. Down: moves more switches.
     min_height_m:     a plan with a waypoint's TCP height below this is refused (``PlanningError``), not
-                      executed [m]: the fingers would be inside the table (top at z = 0). Demonstrated grasps
-                      are at 1-2 cm; late in failed episodes the local prompt was seen to answer -0.5 m.
-                      Up: refuses more plans with low points; down: lets the arm try to push into the table.
+                      executed [m]: the fingers would be inside the table. Measured from the table top (z = 0) with
+                      a ``height_ref: world`` checkpoint (the workcell); with ``height_ref: camera`` (LIBERO: tables
+                      at 0, 0.42 or 0.9 m, the planner knows only its camera) from the lowest TCP height the
+                      checkpoint's training demonstrations reached under the training camera nearest the run's
+                      (``lowest_tcp_by_camera``, 1-3 cm above the table top: grasps; :func:`lowest_plan_height`).
+                      Demonstrated grasps are at 1-2 cm; late in failed episodes the local prompt was seen to answer
+                      -0.5 m. Up: refuses more plans with low points; down: lets the arm try to push into the table.
     """
 
     switch_window: int = 2
@@ -183,9 +187,9 @@ def check_state(q, gripper_closed, dof: int) -> np.ndarray:
 
 
 def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, success_prob=None, *,
-                  min_height_m: float | None = None) -> None:
-    """Refuse non-finite waypoints/heights, heights below ``min_height_m`` (when given) and probabilities that
-    are not finite or outside [0, 1]."""
+                  min_height_m: float | None = None, floor_note: str = "learned.min_height_m; table top at 0") -> None:
+    """Refuse non-finite waypoints/heights, heights below ``min_height_m`` [m, world z] (when given; ``floor_note``
+    says where that bound comes from) and probabilities that are not finite or outside [0, 1]."""
     uv, z, g = np.asarray(uv_px, float), np.asarray(z_m, float), np.asarray(grip_prob, float)
     bad = np.flatnonzero(~(np.isfinite(uv).all(-1) & np.isfinite(z)))
     if bad.size:
@@ -197,7 +201,7 @@ def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, suc
         if bad.size:
             i = int(bad[0])
             raise PlanningError(f"planner output waypoint {i} has TCP height z_m = {z[i]:.4f} m, below the lowest "
-                                f"allowed {min_height_m} m (learned.min_height_m; table top at 0); "
+                                f"allowed {min_height_m:.4f} m ({floor_note}); "
                                 f"{bad.size} of {len(z)} waypoints too low")
     bad = np.flatnonzero(~((g >= 0) & (g <= 1)))
     if bad.size:
@@ -205,6 +209,44 @@ def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, suc
         raise PlanningError(f"planner output gripper probability {g[i]} at waypoint {i} is outside [0, 1]")
     if success_prob is not None and not (0.0 <= float(success_prob) <= 1.0):
         raise PlanningError(f"planner output success probability {success_prob} is outside [0, 1]")
+
+
+def canonical_hand(R: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) world TCP orientations, each replaced by the same parallel-jaw grasp turned 180 degrees about its
+    approach axis (x and y columns negated) when its yaw from the home hand lies outside the range the LIBERO oracle
+    keeps, (YAW_MIN - 180, YAW_MIN] degrees (docs/libero-oracle.md: the other half trips joint 7's tracking
+    reflex). The rotation head is trained up to that symmetry, so either of the two may come out."""
+    from tcot_hybrid.libero.grasps import YAW_MIN_RAD
+
+    R = np.array(R, dtype=float)
+    yaw = np.arctan2(R[:, 0, 1], -R[:, 1, 1])  # yaw_from_home: the closing (y) axis from the home hand's -y
+    flip = (yaw > YAW_MIN_RAD) | (yaw <= YAW_MIN_RAD - np.pi)
+    R[flip, :, :2] *= -1.0
+    return R
+
+
+CAMERA_MATCH_M = 0.10  # a run camera this close to a training camera [m] is that camera (pose shifts are a few cm)
+
+
+def lowest_plan_height(meta: dict, camera: CameraModel, min_height_m: float) -> tuple[float, str]:
+    """(world z below which a planned TCP height is refused, where that bound comes from) for a checkpoint's
+    ``meta`` and the run's planner ``camera``. ``height_ref: world``: ``min_height_m`` itself (table top at z = 0).
+    ``height_ref: camera``: the checkpoint's ``lowest_tcp_by_camera`` (per training camera, the lowest TCP height its
+    demonstrations reached, measured like the network's heights from the camera) of the training camera within
+    CAMERA_MATCH_M of the run's (the lowest of all of them when none is), plus the camera's height and
+    ``min_height_m``. A camera-referenced checkpoint that records none (written before it existed) keeps the world
+    bound."""
+    entries = meta.get("lowest_tcp_by_camera")
+    if meta.get("height_ref", "world") != "camera" or not entries:
+        return float(min_height_m), "learned.min_height_m; table top at 0"
+    pos = np.asarray(camera.T_world_cam, dtype=float)[:3, 3]
+    dist = np.array([np.linalg.norm(np.asarray(e["camera_pos_m"], float) - pos) for e in entries])
+    near = dist <= CAMERA_MATCH_M
+    low = float(min(e["lowest_z_m"] for e, n in zip(entries, near) if n or not near.any()))
+    z = float(pos[2]) + low + float(min_height_m)
+    which = "under this camera" if near.any() else "under any training camera (none within 10 cm of this one)"
+    return z, (f"learned.min_height_m {min_height_m} m from the lowest TCP height the training demonstrations "
+               f"reached {which}, {low:+.4f} m from the camera")
 
 
 class NetworkPlanner(Planner):
@@ -276,6 +318,7 @@ class LearnedPlanner(NetworkPlanner):
 
         self.z_ref = height_reference(camera, self.meta.get("height_ref", "world"))  # [m] world z of height 0
         self.R_world_cam = np.asarray(camera.T_world_cam, dtype=float)[:3, :3]
+        self.min_z_m, self.floor_note = lowest_plan_height(self.meta, camera, config.min_height_m)
 
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
@@ -299,21 +342,23 @@ class LearnedPlanner(NetworkPlanner):
         uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float) + self.z_ref
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
-        check_outputs(uv, z, prob, min_height_m=self.config.min_height_m)
+        check_outputs(uv, z, prob, min_height_m=self.min_z_m, floor_note=self.floor_note)
         tcp_rot = self.orientations(out["rot6"][sl]) if "rot6" in out else None
         return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
                            global_spacing=self.windows.global_spacing, meta={"z_m": z, "gripper_prob": prob},
                            tcp_rot=tcp_rot)
 
     def orientations(self, rot6: np.ndarray) -> np.ndarray:
-        """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs."""
+        """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs, each turned 180
+        degrees about its approach axis when that brings the hand's yaw into the oracle's range (the network is
+        trained up to that parallel-jaw symmetry; :func:`canonical_hand`)."""
         from tcot_hybrid.learning.model import rot6_to_matrix
 
         try:
             R_cam = rot6_to_matrix(rot6)
         except ValueError as exc:
             raise PlanningError(f"planner orientation output cannot be made a rotation: {exc}") from exc
-        return self.R_world_cam @ R_cam
+        return canonical_hand(self.R_world_cam @ R_cam)
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""

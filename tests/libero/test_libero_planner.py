@@ -55,6 +55,13 @@ def test_checkpoint_records_world_robot_and_is_refused_in_the_workcell(tiny_chec
     assert (meta["world"], meta["robot"], meta["height_ref"]) == ("libero", "libero_panda", "camera")
     assert meta["camera"]["per_scene"] and meta["model"]["rot_head"]
     assert np.isfinite(res.metrics["global_rot_deg_median"])
+    data, _ = tiny_checkpoint  # the planner's floor: the lowest TCP height its training demos reached, from the camera
+    with open_demos(data) as f:
+        cam = f.camera_model(f.mask("train")[0])
+        low = min(float(f.read(n, ["obs/robot0_eef_pos"])["obs/robot0_eef_pos"][:, 2].min()) for n in f.mask("train"))
+    (entry,) = meta["lowest_tcp_by_camera"]  # one scene: one camera
+    np.testing.assert_allclose(entry["camera_pos_m"], cam.T_world_cam[:3, 3], atol=1e-4)
+    assert low - 1e-4 <= entry["lowest_z_m"] + cam.T_world_cam[2, 3] <= low + 0.02
     with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
         load_checkpoint(res.checkpoint, world="workcell")
     with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
