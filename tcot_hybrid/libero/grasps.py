@@ -106,22 +106,36 @@ def family(category: str) -> str:
     return "rim" if any(w in c for w in RIM_WORDS) else "top"
 
 
-def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(TCP position, rotation) per box of the object's top ring, closing radially across the wall."""
+def _ring(obj: Boxes, *, recentre: bool = False):
+    """The object's top ring: (indices of its boxes, the object's centre, each box's top, the ring's top).
+    ``recentre``: centre on the ring's boxes rather than the bounding box (a handle shifts the box's centre by
+    half its length; a tilted bowl's highest boxes, all on one side, would shift the ring's instead)."""
     lo, hi = obj.aabb()
     centre = (lo + hi) / 2
     ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
     tops = obj.centre[:, 2] + ext[:, 2]
     top = tops.max()
-    radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
-    ring = (tops >= top - 0.02) & (radial >= 0.35 * radial.max())
-    if not ring.any():
-        return []
-    r_ring = float(np.median(radial[ring]))
-    ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+    high = tops >= top - 0.02
+    ring = np.zeros(len(obj), bool)
+    for _ in range(2 if recentre else 1):
+        radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
+        ring = high & (radial >= 0.35 * radial.max())
+        if not ring.any():
+            return np.zeros(0, int), centre, tops, top
+        r_ring = float(np.median(radial[ring]))
+        ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+        if recentre and ring.sum() >= 3:
+            centre = np.append(obj.centre[ring, :2].mean(axis=0), centre[2])
+    return np.flatnonzero(ring), centre, tops, top
+
+
+def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(TCP position, rotation) per box of the object's top ring, closing radially across the wall."""
+    ring, centre, tops, top = _ring(obj)
+    lo, hi = obj.aabb()
     height = hi[2] - lo[2]
     out = []
-    for i in np.flatnonzero(ring):
+    for i in ring:
         u = obj.centre[i, :2] - centre[:2]
         u = u / np.linalg.norm(u)
         depth = min(0.02, 0.5 * height)
@@ -129,6 +143,31 @@ def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
         p = np.array([obj.centre[i, 0], obj.centre[i, 1], z])
         out.append((p, top_down(u)))
     return out
+
+
+def handle_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Level grasps of a handle (the boxes standing off the top ring's radius, outward: a mug's handle): the
+    hand level, pointing in at the object along the handle's radius, the fingers closing across the handle's
+    outermost bar at its middle. A level hand is 6.4 cm tall and holds the mug ahead of it, so it carries a mug
+    into a cavity a top-down hand cannot enter (the microwave: 14.4 cm tall, the mug 10.3 cm); a level pinch on
+    the rim cannot, since the inner finger, straight and 5 cm long, would cross the curved wall."""
+    ring, centre, _, _ = _ring(obj, recentre=True)
+    if len(ring) == 0:
+        return []
+    radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
+    r_ring = float(np.median(radial[ring]))
+    handle = np.flatnonzero(radial > r_ring + 0.012)
+    if len(handle) == 0:
+        return []
+    bar = int(handle[np.argmax(radial[handle])])
+    u = np.append(obj.centre[bar, :2] - centre[:2], 0.0)
+    u = u / np.linalg.norm(u)
+    tangent = np.cross(E_Z, u)
+    b_lo, b_hi = obj.select(np.arange(len(obj)) == bar).extents_in(frame(-u, tangent), np.zeros(3))
+    if b_hi[1] - b_lo[1] > MAX_SPAN_M:
+        return []
+    p = obj.centre[bar].copy()
+    return [(p, frame(-u, t)) for t in (tangent, -tangent)]
 
 
 def candidate_yaws(obj: Boxes) -> np.ndarray:

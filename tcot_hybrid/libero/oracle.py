@@ -147,7 +147,7 @@ def _destination_object(ctx: OracleContext, target: str | None) -> str | None:
 def _grasp_blockers(ctx: OracleContext, place: PickPlace) -> list[tuple[str, np.ndarray]]:
     """Movable objects the hand hits at ``place``'s best grasp (or on its way down to it), when no grasp is
     clean: (name, the hand's sample points, which the object's new spot must keep clear)."""
-    g = place.grasp(ctx.world, [])
+    g = place.first_grasp(ctx.world, [])
     if g.collisions == 0:
         return []
     pts = np.vstack([hand_points(g.pos - g.rot[:, 2] * dz, g.rot) for dz in (0.0, 0.03, 0.06, 0.10)])

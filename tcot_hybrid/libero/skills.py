@@ -21,6 +21,7 @@ from tcot_hybrid.libero.grasps import (
     E_Z,
     Grasp,
     family,
+    handle_candidates,
     frame,
     hand_points,
     rim_candidates,
@@ -33,6 +34,7 @@ from tcot_hybrid.libero.grasps import (
 from tcot_hybrid.tasks.base import Keyframe, Skill, World
 
 ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
+ARM_LINK_PREFIX = "robot0_link"  # the arm's links (the hand, gripper0_*, is checked by its sample points)
 TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
 RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
@@ -42,6 +44,12 @@ GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves t
 SLIDE_RAISE_M = 0.004  # [m] a grasped object is raised this much before it is dragged out from under something
 SLIDE_MAX_M = 0.10  # [m] furthest such a drag
 SLIDE_LIFT_CHECK_M = 0.08  # [m] a lift counts as clear when the first 8 cm of it are
+SIDE_GRASP_COS = 0.7  # a hand whose approach points less than ~45 degrees below horizontal is a side grasp
+VIEW_MARGIN_PX = 0.5  # [px] every waypoint this far inside the planner camera's image (the executor's margin: 0)
+LEVEL_APPROACH_MAX_Z = 0.35  # a grasp whose approach axis is this close to level carries into a cavity
+CAVITY_CEILING_M = 0.25  # [m] a region with something this low above its floor is a cavity (a microwave)
+CAVITY_ENTRY_M = 0.03  # [m] the carried object starts its way in this far outside the opening
+CAVITY_PUSH_BACK_M = 0.035  # [m] the hand backs off this far to close its fingers in front of what it held  # [px] every waypoint this far inside the planner camera's image border
 
 
 def kf(p, closed: bool, rot=None) -> Keyframe:
@@ -88,9 +96,10 @@ class OracleContext:
         self.camera = getattr(task, "planner_camera", None) or "agentview"
         self.image_px = int(getattr(task, "planner_image_px", None) or 128)
         self._camera_model = None
+        self._reach = None  # (IK solver, T_base_world, scratch arm state), built on first use
 
     # -- the planner camera: plans live in its pixels, so every waypoint must be in its view -----------
-    def in_view(self, p, *, margin_px: float = 2.0) -> bool:
+    def in_view(self, p, *, margin_px: float = VIEW_MARGIN_PX) -> bool:
         """Whether world point ``p`` projects inside the planner camera's image, ``margin_px`` from its border
         (the same camera model the planner projects plans with)."""
         if self._camera_model is None:
@@ -104,6 +113,99 @@ class OracleContext:
         uv, depth = self._camera_model.project(np.asarray(p, float)[None])
         return bool(depth[0] > 0 and self._camera_model.in_image(uv, margin_px=margin_px)[0])
 
+    # -- the arm: a plan whose poses it cannot reach is no plan ------------------------------------------
+    def reachable(self, poses, *, moving: str | None = None, effects: list[Effect] = ()) -> bool:
+        """Whether the arm follows the hand from where it is now through every (position, rotation) of
+        ``poses`` [world] as the executor does, and fits: along the straight, slerped path between them in the
+        planner's steps (4 cm, 0.3 rad), each IK solve seeded from the previous one; every pose of ``poses``
+        must be reached (points on the way need not converge: the executor goes on from where it got), and
+        no arm link may touch the scene (other than ``moving``, the object being moved; the hand itself is
+        checked by the skills' hand points). Measured: a bottle held sideways and lifted over the wine rack
+        walked the arm onto joint 5's limit and stalled 17 cm short; link 6 hit a mug standing behind the one
+        whose handle the hand reached for. The scene is taken as it will be after ``effects``. True when the
+        task carries no robot."""
+        robot = getattr(self.task, "robot", None)
+        if robot is None:
+            return True
+        from scipy.spatial.transform import Rotation, Slerp
+
+        from tcot_hybrid.ik import IKTarget
+        from tcot_hybrid.planners.oracle import OracleConfig
+        from tcot_hybrid.robot_check import REACH_TOL_M, REACH_TOL_RAD
+
+        ik, T, arm = self._arm(robot)
+        self._arm_scene(arm, effects)
+        step = OracleConfig()
+        q = self.data.qpos[arm.qpos].copy()
+        prev = (self.world.tcp_pos(), self.world.tcp_rot())
+        for pos, rot in poses:
+            pos, rot = np.asarray(pos, float), np.asarray(rot, float)
+            turn = float(np.linalg.norm((Rotation.from_matrix(rot) * Rotation.from_matrix(prev[1]).inv()).as_rotvec()))
+            n = max(1, int(np.ceil(max(np.linalg.norm(pos - prev[0]) / step.spacing_m, turn / step.rot_spacing_rad))))
+            slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([prev[1], rot])))
+            for f in np.arange(1, n + 1) / n:
+                p = prev[0] + (pos - prev[0]) * f
+                target = IKTarget(pos=T[:3, :3] @ p + T[:3, 3], rot=T[:3, :3] @ slerp(f).as_matrix())
+                res = ik.solve(target, q)
+                if f == 1.0:  # a key pose must be reached (the executor, too, waits there)
+                    res = res if res.pos_err <= REACH_TOL_M else ik.solve(target, res.q)
+                    if res.pos_err > REACH_TOL_M or res.rot_err > REACH_TOL_RAD:
+                        return False
+                q = res.q
+                if self._arm_hits(arm, q, moving):
+                    return False
+            prev = (pos, rot)
+        return True
+
+    def _arm(self, robot):
+        """(IK solver, T_base_world, the arm's scratch state) for :meth:`reachable`, built on first use."""
+        if self._reach is None:
+            from types import SimpleNamespace
+
+            from tcot_hybrid.ik import IKConfig, make_ik
+            from tcot_hybrid.sim import base_transform
+
+            m = self.model
+            links = {b for b in range(m.nbody) if m.body(b).name.startswith(ARM_LINK_PREFIX)}
+            arm = SimpleNamespace(
+                qpos=np.array([m.jnt_qposadr[m.joint(j).id] for j in robot.arm_joints]),
+                data=mujoco.MjData(m), link_geoms=np.isin(m.geom_bodyid, list(links)))
+            arm.data.qpos[:] = self.data.qpos
+            # on the scratch state: kinematics run on the live state changed what the controller read before
+            # the next step by 1e-14, and the episode drifted onto another outcome
+            self._reach = (make_ik("pinocchio", robot, IKConfig()),
+                           np.linalg.inv(base_transform(robot, m, arm.data)), arm)
+        return self._reach
+
+    def _arm_scene(self, arm, effects) -> None:
+        """The scratch state as the scene will be after ``effects`` (joints at their goals, objects moved)."""
+        m, d = self.model, arm.data
+        d.qpos[:] = self.data.qpos
+        for e in effects:
+            if e.joint is not None:
+                d.qpos[m.jnt_qposadr[e.joint]] = e.q
+            elif e.obj is not None and e.pos is not None:
+                jid = int(m.body_jntadr[int(self.bodies[e.obj][0])])
+                if jid >= 0 and int(m.jnt_type[jid]) == int(mujoco.mjtJoint.mjJNT_FREE):
+                    adr = m.jnt_qposadr[jid]
+                    d.qpos[adr:adr + 3] += e.pos - self.world.pos(e.obj)
+
+    def _arm_hits(self, arm, q, moving: str | None) -> bool:
+        """Whether an arm link (not the hand) at joint values ``q`` penetrates a scene geom (not ``moving``)."""
+        m, d = self.model, arm.data
+        d.qpos[arm.qpos] = q
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        skip = set(self.bodies.get(moving, [])) | self._robot
+        for c in d.contact[: d.ncon]:
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            if c.dist >= 0 or arm.link_geoms[g1] == arm.link_geoms[g2]:
+                continue
+            other = g2 if arm.link_geoms[g1] else g1
+            if int(m.geom_bodyid[other]) not in skip:
+                return True
+        return False
+
     def into_view(self, p, z_floor: float) -> np.ndarray:
         """``p`` lowered (not below ``z_floor``) until the planner camera sees it; unchanged if it already
         does or if no height down to the floor helps."""
@@ -112,7 +214,7 @@ class OracleContext:
             return p
         for z in np.arange(p[2] - 0.01, z_floor - 1e-9, -0.01):
             q = np.array([p[0], p[1], z])
-            if self.in_view(q, margin_px=0.5):
+            if self.in_view(q):  # the same margin the plan is judged by (a lift 1 px inside hid the plan)
                 return q
         return p
 
@@ -285,6 +387,8 @@ class PickPlace(LiberoSkill):
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         parts = parts + tilted(parts, ctx.base_pos)
         cands = rims + tops + tilted(rims + tops, ctx.base_pos) + parts + side_candidates(obj, ctx.base_pos)
+        if kind == "rim" and self._cavity(effects, obstacles) is not None:
+            cands += handle_candidates(obj)
         bottom = float(obj.aabb()[0][2])
         centre_xy = obj.centre[:, :2].mean(axis=0) if len(obj) else np.zeros(2)
 
@@ -347,13 +451,44 @@ class PickPlace(LiberoSkill):
         best = self.grasp(world, effects)
         # plans live in the planner camera's pixels: a grasp whose lift or carry leaves the view (a wine bottle
         # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view
-        first = None
-        for g in [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]:
+        # and so does one the arm cannot reach (a bottle held sideways, lifted over the wine rack)
+        pool = self._grasp_pool(best, effects)
+        first = visible = None
+        for g in pool:
             out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
-            if not out["hidden"]:
+            if not out["hidden"] and ctx.reachable(self._key_poses(out), moving=self.obj, effects=effects):
                 return out
-            first = first or out
+            if not out.get("blocked"):
+                first = first or out
+                visible = visible or (None if out["hidden"] else out)
+        # none both in view and judged within reach: the first one in view still runs (the reach check walks
+        # one IK branch; the executor got to the bowl by the plate in layouts where that walk did not), and a
+        # plan out of view only when there is no other (the executor refuses it)
+        first = visible or first
+        if first is None:
+            raise PlanningError(f"oracle: no grasp of {self.obj!r} carries it into {self.dest.target!r} "
+                                f"({len(pool)} grasps tried: the hand or the object hits the opening's edges)")
         return first
+
+    def _grasp_pool(self, best: Grasp, effects) -> list[Grasp]:
+        """The ranked grasps a plan is tried with (after :meth:`grasp`): the best and its fallbacks; into a
+        cavity only a level hand fits through the opening, so there every level grasp, best first."""
+        pool = [best] + [g for g in self.last_grasps[1:GRASP_FALLBACKS + 1] if g.collisions <= best.collisions]
+        if self._cavity(effects, self.ctx.obstacles(effects, exclude=(self.obj,))) is not None:
+            level = [g for g in self.last_grasps if abs(g.rot[2, 2]) < LEVEL_APPROACH_MAX_Z and all(g is not p for p in pool)]
+            pool += [g for g in level if g.collisions <= min(h.collisions for h in level)] if level else []
+        return pool
+
+    def first_grasp(self, world: World, effects) -> Grasp:
+        """The first grasp whose plan takes the object there and stays in view, before the arm's reach is
+        checked (what a blocker standing in the hand's way is judged against: a mug behind the handle the
+        hand must take to carry another mug into the microwave)."""
+        pool = self._grasp_pool(self.grasp(world, effects), effects)
+        obj_pos = self.ctx.point_after(world.pos(self.obj), int(self.ctx.bodies[self.obj][0]), effects)
+        for g in pool:
+            if not self._plan_with(world, effects, False, obj_pos, g.pos, g.rot)["hidden"]:
+                return g
+        return pool[0]
 
     def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
         ctx = self.ctx
@@ -399,6 +534,15 @@ class PickPlace(LiberoSkill):
             if best is None or key < best[0]:
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
+        cavity = self._cavity(effects, obstacles)
+        if cavity is not None:
+            # lowered from above, the object stops on the cavity's ceiling (a mug on top of the microwave):
+            # then it goes in through the opening, level, or this grasp cannot take it there
+            bottom = best[1]["release"][2] - best[1]["obj_below_tcp"]
+            if bottom > cavity[0][2] + cavity[3][2]:
+                best = self._place_in_cavity(cavity, obj_boxes, rel_c, rel_R, rel_origin, g_rot, obstacles, start)
+        if best is None:  # no way into the cavity with this grasp: the next grasp is tried
+            return dict(held=held, grasp_pos=g_pos, grasp_rot=g_rot, hidden=True, blocked=True)
         out = best[1]
         slide = None if held else self._slide_out(g_pos, g_rot, rel_c, rel_R, obj_boxes, obstacles)
         lift_from = slide if slide is not None else start
@@ -410,6 +554,111 @@ class PickPlace(LiberoSkill):
                    obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
                    hidden=bool(best[0][0]) or not ctx.in_view(lift))
         return out
+
+    def _cavity(self, effects, obstacles: Boxes):
+        """For an ``in`` destination region with something low above it (a microwave's ceiling): (region centre,
+        inward opening direction n (horizontal, unit), region rotation, half sizes (3,)); None when the region is
+        open from above (a basket, a drawer, a tray). The opening is the region's side whose rays, from the
+        region's centre outward to 10 cm past its face, meet nothing."""
+        d = self.dest
+        if d.relation != "in" or not d.is_site or d.point is not None:
+            return None
+        ctx = self.ctx
+        sid = ctx.model.site(d.target).id
+        centre = ctx.point_after(ctx.data.site_xpos[sid], int(ctx.model.site_bodyid[sid]), effects)
+        R = ctx.rot_after(ctx.data.site_xmat[sid].reshape(3, 3), int(ctx.model.site_bodyid[sid]), effects)
+        half = ctx.model.site_size[sid].copy()
+        floor = centre[2] - half[2]
+        grid = [centre + R[:, 0] * fx * half[0] + R[:, 1] * fy * half[1]
+                for fx in (-0.5, 0.0, 0.5) for fy in (-0.5, 0.0, 0.5)]
+        zs = floor + np.arange(0.06, CAVITY_CEILING_M, 0.01)
+        above = np.array([[g[0], g[1], z] for g in grid for z in zs])
+        covered = obstacles.contains(above).reshape(len(grid), len(zs)).any(axis=1)
+        if covered.mean() < 0.5:
+            return None
+        best = None
+        for axis, sign in ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
+            out = sign * R[:, axis]
+            out = np.array([out[0], out[1], 0.0]) / max(np.linalg.norm(out[:2]), 1e-9)
+            across = R[:, 1 - axis]
+            rays = []
+            for f in (-0.5, 0.0, 0.5):
+                for z in (floor + 0.03, floor + 0.06):
+                    o = np.array([centre[0], centre[1], z]) + across * f * half[1 - axis]
+                    rays += [o + out * t for t in np.arange(0.0, half[axis] + 0.10, 0.01)]
+            hits = obstacles.contains(np.array(rays)).reshape(6, -1).any(axis=1).mean()
+            if best is None or hits < best[0]:
+                best = (hits, -out)
+        if best[0] > 0.2:
+            return None  # enclosed on every side: nothing a hand can do
+        return centre, best[1], R, half
+
+    def _place_in_cavity(self, cavity, obj_boxes: Boxes, rel_c, rel_R, rel_origin, g_rot, obstacles: Boxes,
+                         start) -> tuple | None:
+        """Release pose for a level grasp carried straight in through the cavity's opening: the hand turned
+        about the vertical so it points in, the object's origin inside the region as deep as the hand and the
+        object stay clear of everything (checked along the whole way in), the object's bottom RELEASE_GAP_M
+        above the cavity's floor. None when no such pose exists (the grasp's hand does not fit through)."""
+        ctx = self.ctx
+        centre, n, R, half = cavity
+        a = g_rot[:, 2]
+        if abs(a[2]) >= LEVEL_APPROACH_MAX_Z:
+            return None
+        yaw = float(np.arctan2(n[1], n[0]) - np.arctan2(a[1], a[0]))
+        R_place = rot_z(yaw) @ g_rot
+        across = np.cross(E_Z, n)
+
+        def carried(tcp) -> Boxes:
+            return Boxes(tcp + rel_c @ R_place.T, np.einsum("ij,njk->nik", R_place, rel_R), obj_boxes.half,
+                         obj_boxes.geom)
+
+        def clear(tcp) -> bool:
+            return not (obstacles.contains(hand_points(tcp, R_place, closed=True), margin=0.004).any()
+                        or self._boxes_hit(carried(tcp), obstacles, margin=0.004))
+
+        origin_off = R_place @ rel_origin
+        probe = carried(np.zeros(3))
+        lo, hi = probe.aabb()
+        ext_n = float(np.max(np.abs((probe.centre - probe.centre.mean(axis=0)) @ n)) + obj_boxes.half.max())
+        # region bounds along n and across it (LIBERO's In: the object's origin inside the region's box)
+        c_n, c_a = float(centre[:2] @ n[:2]), float(centre[:2] @ across[:2])
+        h_n = float(np.abs(R.T @ n) @ half)
+        h_a = float(np.abs(R.T @ across) @ half)
+        floor_ref = centre[2] - half[2]
+        for depth in np.arange(h_n - 0.02, -h_n + 0.015, -0.01):  # deepest first
+            for off in (0.0, 0.25, -0.25, 0.5, -0.5):
+                o_xy = (c_n + depth) * n[:2] + (c_a + off * h_a) * across[:2]
+                tcp_xy = o_xy - origin_off[:2]
+                foot_lo, foot_hi = lo[:2] + tcp_xy, hi[:2] + tcp_xy
+                near = _near(obstacles, np.append(foot_lo, 0) - 0.01, np.append(foot_hi, 0) + 0.01)
+                support = self._support_z(near, np.append(foot_lo, lo[2]), np.append(foot_hi, hi[2]))
+                if support < floor_ref - 0.03:
+                    continue  # nothing to stand on there
+                release = np.array([tcp_xy[0], tcp_xy[1], support + RELEASE_GAP_M - lo[2]])
+                way_in = release - n * (ext_n + CAVITY_ENTRY_M)
+                path = [way_in + (release - way_in) * f for f in np.linspace(0.0, 1.0, 12)]
+                if not all(clear(q) for q in path):
+                    continue
+                top = ctx.clear_z(start, way_in, obstacles, radius=0.08)
+                carry_z = max(top + TRAVEL_CLEARANCE_M - lo[2], start[2] + LIFT_M, way_in[2] + 0.06)
+                drop = [np.array([way_in[0], way_in[1], z]) for z in np.arange(way_in[2], carry_z, 0.02)]
+                if not all(clear(q) for q in drop):
+                    continue
+                hidden = not all(ctx.in_view(q) for q in (release, way_in))
+                return ((hidden,), dict(release=release, release_rot=R_place, carry_z=carry_z,
+                                        carry_floor=way_in[2] + 0.03, obj_below_tcp=float(-lo[2]),
+                                        way_in=way_in))
+        return None
+
+    @staticmethod
+    def _key_poses(p: dict) -> list:
+        """The plan's poses that decide whether the arm reaches it: pre-grasp, grasp, lift, above and at the
+        release."""
+        g, R, Rp, rel = p["grasp_pos"], p["grasp_rot"], p["release_rot"], p["release"]
+        above = rel if p.get("way_in") is None else p["way_in"]
+        poses = [(g - R[:, 2] * APPROACH_DZ, R), (g, R), (p["lift"], R),
+                 (np.array([above[0], above[1], max(p["carry_floor"], above[2] + 0.03)]), Rp)]
+        return poses + ([] if p.get("way_in") is None else [(p["way_in"], Rp)]) + [(rel, Rp)]
 
     def _slide_out(self, g_pos, g_rot, rel_c, rel_R, obj_boxes: Boxes, obstacles: Boxes) -> np.ndarray | None:
         """Where to drag the grasped object (TCP position, raised SLIDE_RAISE_M) before lifting it, when a
@@ -539,6 +788,20 @@ class PickPlace(LiberoSkill):
         for off in offsets:
             yield centre[:2] + R[:2, :2] @ off, best_yaw
 
+    def _retreat(self, release, R_place, carry_z: float) -> np.ndarray:
+        """Where the open hand goes after the release: up for a hand from above; for a side grasp, back out
+        along its approach axis first (rising with the fingers round a bottle's neck lifts it off the rack,
+        and above the rack top the planner camera no longer sees the hand)."""
+        ctx = self.ctx
+        approach = R_place[:, 2]
+        if approach[2] < -SIDE_GRASP_COS:
+            return ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
+        for dist in (LIFT_M, 0.09, 0.06):
+            p = release - approach * dist
+            if ctx.in_view(p):
+                return p
+        return release - approach * 0.06
+
     def _keyframes(self, world: World) -> list[Keyframe]:
         ctx = self.ctx
         p = self._plan(world)
@@ -561,14 +824,23 @@ class PickPlace(LiberoSkill):
         lift = p["lift"] if not p["held"] else ctx.into_view(
             [start[0], start[1], carry_z],
             max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2] + 0.03))
-        over = ctx.into_view([release[0], release[1], carry_z], max(floor, release[2] + 0.03))
-        kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()),
-                kf(over, True, R_place),
-                kf(release + np.array([0, 0, 0.03]), True, R_place),
-                kf(release, True, R_place),
-                kf(release, False, R_place)]
-        up = ctx.into_view([release[0], release[1], max(release[2] + LIFT_M, carry_z)], release[2] + 0.04)
-        kfs.append(kf(up, False, R_place))
+        way_in = p.get("way_in")  # into a cavity: down in front of its opening, then straight in
+        above = release if way_in is None else way_in
+        over = ctx.into_view([above[0], above[1], carry_z], max(floor, above[2] + 0.03))
+        kfs += [kf(lift, True, g_rot if not p["held"] else world.tcp_rot()), kf(over, True, R_place)]
+        kfs += ([kf(release + np.array([0, 0, 0.03]), True, R_place)] if way_in is None
+                else [kf(way_in, True, R_place)])
+        kfs += [kf(release, True, R_place), kf(release, False, R_place)]
+        if way_in is None:
+            kfs.append(kf(self._retreat(release, R_place, carry_z), False, R_place))
+        else:
+            # in a cavity the palm stops at the opening, so what the hand held (a mug's handle) ends up just
+            # inside it, in the way of the door (a microwave's stopped 11 degrees short): back off, close, and
+            # push it home with the fingertips, which reach 1.2 cm past where they held it (opening there makes
+            # the push's end a stop: the executor blends through other waypoints and fell 2 cm short)
+            back = release - R_place[:, 2] * CAVITY_PUSH_BACK_M
+            kfs += [kf(back, False, R_place), kf(back, True, R_place), kf(release, True, R_place),
+                    kf(release, False, R_place), kf(self._retreat(release, R_place, carry_z), False, R_place)]
         if not p["held"]:
             kfs[0] = kf(ctx.into_view(kfs[0].pos, g_pos[2] + 0.04), False, g_rot)
             # the way in: when the straight way from home (or from where the hand is) would hit something, the

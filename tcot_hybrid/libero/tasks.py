@@ -135,6 +135,7 @@ class LiberoTask(Task):
             raise ConfigError(f"LIBERO task {self.name!r} runs robot {ROBOT!r} (its scenes mount that Panda), "
                               f"not {robot.name!r}; drop --robot or pass --robot {ROBOT}")
         px = max(scene.planner_image_px, scene.video_width, scene.video_height)
+        self.robot = robot  # the oracle checks its keyframes are within this arm's reach
         self.scene = LiberoScene.acquire(self.info.bddl_path, sim_dt=timing.sim_dt, max_image_px=px)
         check_camera(self.scene.model, scene.planner_camera)
         import tcot_hybrid.libero.oracle  # noqa: F401  (its imports stay out of the first plan's time budget)

@@ -131,8 +131,13 @@ class OraclePlanner(Planner):
 
     def prepare(self) -> None:
         """Compose the script and its grasps for the settled scene (LIBERO's take ~0.6 s, and the first call
-        is timed: under load it went stale): the first plan at this instant reuses them."""
-        self.path_posed()
+        is timed: under load it went stale): the first plan at this instant reuses them. A script that cannot be
+        composed is left to the first plan call, which raises the same PlanningError and the episode logs it
+        as a rejected plan (it is no crash)."""
+        try:
+            self.path_posed()
+        except PlanningError:
+            pass
 
     def success_probability(self, obs: Observation) -> float:
         """Privileged: the simulator's own success predicate (the detector's upper bound)."""

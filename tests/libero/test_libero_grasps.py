@@ -2,7 +2,7 @@
 import numpy as np
 
 from tcot_hybrid.libero.geometry import Boxes
-from tcot_hybrid.libero.grasps import MAX_SPAN_M, part_candidates, rot_z, top_candidates
+from tcot_hybrid.libero.grasps import MAX_SPAN_M, handle_candidates, part_candidates, rot_z, top_candidates
 
 
 def boxes(*specs) -> Boxes:
@@ -41,3 +41,33 @@ def test_a_plain_box_too_wide_for_the_hand_has_no_part_to_grasp():
     assert 2 * 0.05 > MAX_SPAN_M
     assert top_candidates(wide) == []
     assert part_candidates(wide) == []
+
+
+def mug(n_wall: int = 16, radius: float = 0.042, handle_dir=(0.0, -1.0)) -> Boxes:
+    """A mug as LIBERO models it: a ring of thin wall boxes, a bottom, and a handle bar 8 cm out."""
+    specs = []
+    for k in range(n_wall):
+        a = 2 * np.pi * k / n_wall
+        specs.append(([radius * np.cos(a), radius * np.sin(a), 0.05], [0.004, 0.009, 0.045], a))
+    specs.append(([0.0, 0.0, 0.005], [0.03, 0.03, 0.005], 0.0))
+    u = np.array(handle_dir, float) / np.linalg.norm(handle_dir)
+    specs.append(([0.08 * u[0], 0.08 * u[1], 0.055], [0.009, 0.004, 0.029], np.arctan2(u[1], u[0])))
+    return boxes(*specs)
+
+
+def test_handle_grasps_hold_a_mugs_handle_level_pointing_in_at_the_mug():
+    for handle_dir in ((0.0, -1.0), (1.0, 1.0)):
+        u = np.append(np.array(handle_dir) / np.linalg.norm(handle_dir), 0.0)
+        cands = handle_candidates(mug(handle_dir=handle_dir))
+        assert len(cands) == 2  # the two rolls of the hand
+        for p, R in cands:
+            assert np.allclose(p[:2], 0.08 * u[:2], atol=1e-9)  # on the handle's bar
+            assert np.allclose(R[:, 2], -u, atol=1e-9)  # level, pointing in along the handle's radius
+            assert abs(R[:, 1] @ u) < 1e-9 and abs(R[2, 1]) < 1e-9  # closing across the bar, horizontally
+            assert np.allclose(R.T @ R, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0
+
+
+def test_an_object_without_a_handle_has_no_handle_grasp():
+    bowl = boxes(*[([0.06 * np.cos(a), 0.06 * np.sin(a), 0.03], [0.004, 0.012, 0.03], a)
+                   for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)])
+    assert handle_candidates(bowl) == []

@@ -21,6 +21,9 @@ FAMILIES = [
     ("turnon: stove knob pushed along its arc", "libero_goal:turn_on_the_stove", 0),
     ("in + close: bowl into an open drawer, drawer pushed shut",
      "libero_10:KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it", 0),
+    ("in + close: mug carried level by its handle into the microwave, door pushed shut",
+     "libero_10:KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it", 2000),
+    ("on: side grasp, wine bottle onto the rack's sloped top", "libero_goal:put_the_wine_bottle_on_the_rack", 2003),
 ]
 
 
@@ -42,3 +45,58 @@ def test_a_predicate_without_a_skill_is_refused_by_name():
     msg = str(err.value)
     assert "'up'" in msg and "lift_the_bowl" in msg
     assert all(p in msg for p in SUPPORTED_PREDICATES)
+
+
+MICROWAVE = "libero_10:KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it"
+
+
+@pytest.fixture(scope="module")
+def microwave():
+    runner = EpisodeRunner(RunConfig(task=MICROWAVE, seed=2000, init="sampled", planner="oracle"))
+    runner.settle()
+    task = runner.stack.task
+    task.skills()
+    return task._oracle
+
+
+def test_a_region_under_a_ceiling_is_a_cavity_entered_through_its_open_side(microwave):
+    import mujoco
+    import numpy as np
+
+    from tcot_hybrid.libero.skills import PickPlace
+
+    ctx = microwave
+    place = next(s for s in ctx.skills if isinstance(s, PickPlace) and s.dest.relation == "in")
+    effects = ctx.effects_before(place, ctx.world)
+    cavity = place._cavity(effects, ctx.obstacles(effects, exclude=(place.obj,)))
+    assert cavity is not None
+    centre, n, _, _ = cavity
+    assert abs(n[2]) < 1e-9 and abs(np.linalg.norm(n) - 1.0) < 1e-9
+    # the door's hinge stands at the opening: the way in runs from it towards the region's centre
+    hinge = ctx.data.xanchor[mujoco.mj_name2id(ctx.model, mujoco.mjtObj.mjOBJ_JOINT, "microwave_1_microjoint")]
+    assert n[:2] @ (centre[:2] - hinge[:2]) > 0.05
+    # the plan carries the mug in level, from outside the opening
+    plan = place._plan(ctx.world)
+    assert plan["way_in"] is not None and abs(plan["release_rot"][2, 2]) < 0.35
+    assert (plan["release"] - plan["way_in"])[:2] @ n[:2] > 0.05
+
+
+def test_an_open_region_is_no_cavity():
+    from tcot_hybrid.libero.skills import PickPlace
+
+    runner = EpisodeRunner(RunConfig(task="libero_object:pick_up_the_ketchup_and_place_it_in_the_basket", seed=3,
+                                     init="sampled", planner="oracle"))
+    runner.settle()
+    task = runner.stack.task
+    task.skills()
+    ctx = task._oracle
+    place = next(s for s in ctx.skills if isinstance(s, PickPlace))
+    assert place._cavity([], ctx.obstacles([], exclude=(place.obj,))) is None
+
+
+def test_the_arm_reaches_its_home_but_not_a_point_two_metres_away(microwave):
+    import numpy as np
+
+    ctx = microwave
+    assert ctx.reachable([(ctx.home_tcp, ctx.home_rot)])
+    assert not ctx.reachable([(ctx.home_tcp + np.array([2.0, 0.0, 0.0]), ctx.home_rot)])
