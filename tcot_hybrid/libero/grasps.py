@@ -106,6 +106,9 @@ def family(category: str) -> str:
     return "rim" if any(w in c for w in RIM_WORDS) else "top"
 
 
+RING_RADIUS_TOL_M = 0.012  # [m] a ring's boxes lie this close to its median radius; handles and spouts beyond
+
+
 def _ring(obj: Boxes, *, recentre: bool = False):
     """The object's top ring: (indices of its boxes, the object's centre, each box's top, the ring's top).
     ``recentre``: centre on the ring's boxes rather than the bounding box (a handle shifts the box's centre by
@@ -123,7 +126,7 @@ def _ring(obj: Boxes, *, recentre: bool = False):
         if not ring.any():
             return np.zeros(0, int), centre, tops, top
         r_ring = float(np.median(radial[ring]))
-        ring &= np.abs(radial - r_ring) <= 0.012  # handles and spouts sit off the ring's radius
+        ring &= np.abs(radial - r_ring) <= RING_RADIUS_TOL_M
         if recentre and ring.sum() >= 3:
             centre = np.append(obj.centre[ring, :2].mean(axis=0), centre[2])
     return np.flatnonzero(ring), centre, tops, top
@@ -156,7 +159,7 @@ def handle_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
         return []
     radial = np.linalg.norm(obj.centre[:, :2] - centre[:2], axis=1)
     r_ring = float(np.median(radial[ring]))
-    handle = np.flatnonzero(radial > r_ring + 0.012)
+    handle = np.flatnonzero(radial > r_ring + RING_RADIUS_TOL_M)
     if len(handle) == 0:
         return []
     bar = int(handle[np.argmax(radial[handle])])

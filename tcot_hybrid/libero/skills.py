@@ -49,7 +49,7 @@ VIEW_MARGIN_PX = 0.5  # [px] every waypoint this far inside the planner camera's
 LEVEL_APPROACH_MAX_Z = 0.35  # a grasp whose approach axis is this close to level carries into a cavity
 CAVITY_CEILING_M = 0.25  # [m] a region with something this low above its floor is a cavity (a microwave)
 CAVITY_ENTRY_M = 0.03  # [m] the carried object starts its way in this far outside the opening
-CAVITY_PUSH_BACK_M = 0.035  # [m] the hand backs off this far to close its fingers in front of what it held  # [px] every waypoint this far inside the planner camera's image border
+CAVITY_PUSH_BACK_M = 0.035  # [m] the hand backs off this far to close its fingers in front of what it held
 
 
 def kf(p, closed: bool, rot=None) -> Keyframe:
