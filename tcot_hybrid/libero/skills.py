@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 
 from tcot_hybrid.errors import PlanningError
-from tcot_hybrid.libero.geometry import Boxes, collision_boxes, subtree_bodies
+from tcot_hybrid.libero.geometry import Boxes, boxes_overlap, collision_boxes, subtree_bodies
 from tcot_hybrid.libero.grasps import (
     APPROACH_DZ,
     E_Z,
@@ -38,6 +38,12 @@ ARM_LINK_PREFIX = "robot0_link"  # the arm's links (the hand, gripper0_*, is che
 TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
 RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
+# A release whose carried object has less than this side clearance to a wall (an obstacle rising
+# WALL_RISE_M above the object's bottom) is tight: any swing in the fingers lands it on the wall. A clear
+# release up to PLACE_MAX_DROP_M above the lowest one is preferred (a book into a caddy's narrow slot).
+PLACE_CLEARANCE_M = 0.005
+WALL_RISE_M = 0.02
+PLACE_MAX_DROP_M = 0.08
 TRANSIT_RADIUS_M = 0.10  # [m] obstacles this close to the hand's straight way in count (the palm is 21 cm wide)
 TRANSIT_CLEARANCE_M = 0.05  # [m] the TCP this far above them on the way in
 GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves the planner camera's view
@@ -500,7 +506,7 @@ class PickPlace(LiberoSkill):
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         start = world.tcp_pos() if held else g_pos
         best = None
-        for place_xy, yaw in self._place_candidates(world, effects, obj_boxes, obj_pos):
+        for place_xy, yaw, spot in self._place_candidates(world, effects, obj_boxes, obj_pos):
             R_place = rot_z(yaw) @ g_rot
             tcp_xy = place_xy - (R_place @ rel_origin)[:2]
 
@@ -530,7 +536,8 @@ class PickPlace(LiberoSkill):
             over = ctx.into_view([tcp_xy[0], tcp_xy[1], carry_z], max(top + 0.01 - lo[2], z + 0.03))
             hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03]))
                           and ctx.in_view(over))
-            key = (hidden, round(z - z_min, 2), float(np.linalg.norm(place_xy - self._centre_xy(world, effects))))
+            key = (hidden, z - z_min > PLACE_MAX_DROP_M, self._tight(carried(release_pt), near),
+                   round(z - z_min, 2), float(np.linalg.norm(spot - self._centre_xy(world, effects))))
             if best is None or key < best[0]:
                 best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
                                   carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
@@ -694,12 +701,25 @@ class PickPlace(LiberoSkill):
                     return end
         return None
 
+    def _tight(self, body: Boxes, near: Boxes) -> bool:
+        """Whether ``body`` moved sideways by PLACE_CLEARANCE_M (either way along x or y) meets a wall:
+        a box of ``near`` whose top rises WALL_RISE_M above the body's bottom (low rims do not count)."""
+        bottom = body.aabb()[0][2]
+        ext = np.einsum("nij,nj->ni", np.abs(near.rot), near.half)
+        walls = near.select(near.centre[:, 2] + ext[:, 2] > bottom + WALL_RISE_M)
+        if not len(walls):
+            return False
+        lift = np.array([0.0, 0.0, 0.003])  # clear of the support it is released over
+        for shift in np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]) * PLACE_CLEARANCE_M:
+            moved = Boxes(body.centre + shift + lift, body.rot, body.half, body.geom)
+            if self._boxes_hit(moved, walls):
+                return True
+        return False
+
     @staticmethod
     def _boxes_hit(body: Boxes, obstacles: Boxes, margin: float = 0.002) -> bool:
-        """Conservative box-vs-box test: each carried box's corners and centre against the obstacles."""
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)] + [[0, 0, 0]], float)
-        pts = body.centre[:, None, :] + np.einsum("nij,nkj->nki", body.rot, signs[None] * body.half[:, None, :])
-        return bool(obstacles.contains(pts.reshape(-1, 3), margin=margin).any())
+        """Whether any carried box overlaps an obstacle box grown by ``margin`` [m]."""
+        return bool(boxes_overlap(body, obstacles, margin).any())
 
     def _support_z(self, obstacles: Boxes, lo, hi) -> float:
         """Top of the highest obstacle box under the footprint [lo, hi] (xy) whose top is below the
@@ -759,20 +779,22 @@ class PickPlace(LiberoSkill):
         return offset
 
     def _place_candidates(self, world, effects, obj_boxes: Boxes, obj_pos):
-        """(object origin xy, hand yaw change) candidates: the region's centre (or this object's slot in it)
-        and, inside a region, a grid of offsets; the yaw is the one that best fits the footprint in the
-        region (books into narrow slots)."""
+        """(object origin xy, hand yaw change, spot xy) candidates: the object's footprint centred on a spot,
+        the region's centre (or this object's slot in it) and, inside a region, a grid of offsets; the yaw is
+        the one that best fits the footprint in the region (books into narrow slots)."""
         centre, R, half = self._region(world, effects)
-        best, best_yaw = -np.inf, 0.0
+        best, best_yaw, footprint = -np.inf, 0.0, np.zeros(2)
         for yaw in np.deg2rad([0, 15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90]):
             Rz = rot_z(yaw)
             b = Boxes((obj_boxes.centre - obj_pos) @ Rz.T, np.einsum("ij,njk->nik", Rz, obj_boxes.rot),
                       obj_boxes.half, obj_boxes.geom)
             lo, hi = b.extents_in(R, np.zeros(3))
-            slack = float(np.min(np.concatenate([half - hi[:2], half + lo[:2]]))) if self.dest.is_site else 0.0
+            # the footprint's centre, not the origin, goes to each spot (a book's origin sits off its middle)
+            mid = (lo[:2] + hi[:2]) / 2 if self.dest.is_site else np.zeros(2)
+            slack = float(np.min(half - (hi[:2] - lo[:2]) / 2)) if self.dest.is_site else 0.0
             fit = min(slack, 0.01) - 0.002 * abs(yaw)
             if fit > best + 1e-9:
-                best, best_yaw = fit, yaw
+                best, best_yaw, footprint = fit, yaw, R[:2, :2] @ mid
         offsets = []
         f = 0.6 if self.dest.slots == 1 else 0.5 / self.dest.slots
         bases = [self._slot_offset(half, axis) for axis in ((None,) if self.dest.slots == 1 else (0, 1))]
@@ -786,7 +808,8 @@ class PickPlace(LiberoSkill):
                     if fx or fy:
                         offsets.append(base + np.array([fx * half[0], fy * half[1]]))
         for off in offsets:
-            yield centre[:2] + R[:2, :2] @ off, best_yaw
+            spot = centre[:2] + R[:2, :2] @ off
+            yield spot - footprint, best_yaw, spot
 
     def _retreat(self, release, R_place, carry_z: float) -> np.ndarray:
         """Where the open hand goes after the release: up for a hand from above; for a side grasp, back out
