@@ -36,7 +36,10 @@ from tcot_hybrid.tasks.base import Keyframe, Skill, World
 ROBOT_PREFIXES = ("robot0_", "gripper0_", "mount0_")
 ARM_LINK_PREFIX = "robot0_link"  # the arm's links (the hand, gripper0_*, is checked by its sample points)
 TRAVEL_CLEARANCE_M = 0.05  # [m] carried object / hand above the highest obstacle under a transport move
-RELEASE_GAP_M = 0.012  # [m] a placed object's bottom this far above its support when released
+# [m] a placed object's bottom this far above its support when released: a bowl held by its rim sags in the
+# fingers, and released from higher it landed off the plate (a rim-pinch slips as it comes down)
+RELEASE_GAP_M = 0.004
+CAVITY_GAP_M = 0.012  # [m] the same for an object slid in level through a cavity's opening: clear of its floor
 LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving sideways
 # A release whose carried object has less than this side clearance to a wall (an obstacle rising
 # WALL_RISE_M above the object's bottom) is tight: any swing in the fingers lands it on the wall. A clear
@@ -44,6 +47,7 @@ LIFT_M = 0.12  # [m] straight lift after a grasp or a release before moving side
 PLACE_CLEARANCE_M = 0.005
 WALL_RISE_M = 0.02
 PLACE_MAX_DROP_M = 0.08
+PLACE_ALTERNATIVES = 3  # ranked releases tried per grasp for one the arm can reach
 TRANSIT_RADIUS_M = 0.10  # [m] obstacles this close to the hand's straight way in count (the palm is 21 cm wide)
 TRANSIT_CLEARANCE_M = 0.05  # [m] the TCP this far above them on the way in
 GRASP_FALLBACKS = 8  # ranked grasps tried after the best when its plan leaves the planner camera's view
@@ -461,9 +465,11 @@ class PickPlace(LiberoSkill):
         pool = self._grasp_pool(best, effects)
         first = visible = None
         for g in pool:
-            out = self._plan_with(world, effects, held, obj_pos, g.pos, g.rot)
-            if not out["hidden"] and ctx.reachable(self._key_poses(out), moving=self.obj, effects=effects):
-                return out
+            plans = self._plans_with(world, effects, held, obj_pos, g.pos, g.rot)
+            for out in plans:
+                if not out["hidden"] and ctx.reachable(self._key_poses(out), moving=self.obj, effects=effects):
+                    return out
+            out = plans[0]
             if not out.get("blocked"):
                 first = first or out
                 visible = visible or (None if out["hidden"] else out)
@@ -497,6 +503,13 @@ class PickPlace(LiberoSkill):
         return pool[0]
 
     def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
+        """The best-ranked plan for this grasp (:meth:`_plans_with`)."""
+        return self._plans_with(world, effects, held, obj_pos, g_pos, g_rot)[0]
+
+    def _plans_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> list[dict]:
+        """Plans that carry the object, held by the grasp (g_pos, g_rot), to its destination: the best-ranked
+        releases first (up to PLACE_ALTERNATIVES, so that a release the arm cannot reach gives way to the next
+        one before the grasp does)."""
         ctx = self.ctx
         obj_boxes = ctx.object_boxes(self.obj, effects)
         # the object in the hand's frame (rigid while held)
@@ -505,7 +518,7 @@ class PickPlace(LiberoSkill):
         rel_origin = g_rot.T @ (obj_pos - g_pos)
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         start = world.tcp_pos() if held else g_pos
-        best = None
+        ranked = []
         for place_xy, yaw, spot in self._place_candidates(world, effects, obj_boxes, obj_pos):
             R_place = rot_z(yaw) @ g_rot
             tcp_xy = place_xy - (R_place @ rel_origin)[:2]
@@ -538,29 +551,32 @@ class PickPlace(LiberoSkill):
                           and ctx.in_view(over))
             key = (hidden, z - z_min > PLACE_MAX_DROP_M, self._tight(carried(release_pt), near),
                    round(z - z_min, 2), float(np.linalg.norm(spot - self._centre_xy(world, effects))))
-            if best is None or key < best[0]:
-                best = (key, dict(release=np.array([tcp_xy[0], tcp_xy[1], z]), release_rot=R_place,
-                                  carry_z=carry_z, carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2])))
+            ranked.append((key, len(ranked), dict(release=release_pt, release_rot=R_place, carry_z=carry_z,
+                                                   carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2]))))
+        ranked = [(key, plan) for key, _, plan in sorted(ranked, key=lambda r: r[:2])]
         cavity = self._cavity(effects, obstacles)
         if cavity is not None:
             # lowered from above, the object stops on the cavity's ceiling (a mug on top of the microwave):
             # then it goes in through the opening, level, or this grasp cannot take it there
-            bottom = best[1]["release"][2] - best[1]["obj_below_tcp"]
+            bottom = ranked[0][1]["release"][2] - ranked[0][1]["obj_below_tcp"]
             if bottom > cavity[0][2] + cavity[3][2]:
-                best = self._place_in_cavity(cavity, obj_boxes, rel_c, rel_R, rel_origin, g_rot, obstacles, start)
-        if best is None:  # no way into the cavity with this grasp: the next grasp is tried
-            return dict(held=held, grasp_pos=g_pos, grasp_rot=g_rot, hidden=True, blocked=True)
-        out = best[1]
+                inside = self._place_in_cavity(cavity, obj_boxes, rel_c, rel_R, rel_origin, g_rot, obstacles, start)
+                ranked = [] if inside is None else [inside]
+        if not ranked:  # no way into the cavity with this grasp: the next grasp is tried
+            return [dict(held=held, grasp_pos=g_pos, grasp_rot=g_rot, hidden=True, blocked=True)]
         slide = None if held else self._slide_out(g_pos, g_rot, rel_c, rel_R, obj_boxes, obstacles)
         lift_from = slide if slide is not None else start
         held_boxes = Boxes(rel_c @ g_rot.T, np.einsum("ij,njk->nik", g_rot, rel_R), obj_boxes.half, obj_boxes.geom)
         below = float(-held_boxes.aabb()[0][2])  # how far the object hangs under the TCP, held as grasped
         lift_floor = max(ctx.clear_z(lift_from, lift_from, obstacles, radius=0.08) + 0.02 + below, lift_from[2] + 0.03)
-        lift = ctx.into_view([lift_from[0], lift_from[1], best[1]["carry_z"]], lift_floor)
-        out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles, slide=slide,
-                   obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
-                   hidden=bool(best[0][0]) or not ctx.in_view(lift))
-        return out
+        plans = []
+        for key, out in ranked[:PLACE_ALTERNATIVES]:
+            lift = ctx.into_view([lift_from[0], lift_from[1], out["carry_z"]], lift_floor)
+            out.update(held=held, grasp_pos=g_pos, grasp_rot=g_rot, obstacles=obstacles, slide=slide,
+                       obj_at_release=out["release"] + out["release_rot"] @ rel_origin, lift=lift,
+                       hidden=bool(key[0]) or not ctx.in_view(lift))
+            plans.append(out)
+        return plans
 
     def _cavity(self, effects, obstacles: Boxes):
         """For an ``in`` destination region with something low above it (a microwave's ceiling): (region centre,
@@ -604,7 +620,7 @@ class PickPlace(LiberoSkill):
                          start) -> tuple | None:
         """Release pose for a level grasp carried straight in through the cavity's opening: the hand turned
         about the vertical so it points in, the object's origin inside the region as deep as the hand and the
-        object stay clear of everything (checked along the whole way in), the object's bottom RELEASE_GAP_M
+        object stay clear of everything (checked along the whole way in), the object's bottom CAVITY_GAP_M
         above the cavity's floor. None when no such pose exists (the grasp's hand does not fit through)."""
         ctx = self.ctx
         centre, n, R, half = cavity
@@ -641,7 +657,7 @@ class PickPlace(LiberoSkill):
                 support = self._support_z(near, np.append(foot_lo, lo[2]), np.append(foot_hi, hi[2]))
                 if support < floor_ref - 0.03:
                     continue  # nothing to stand on there
-                release = np.array([tcp_xy[0], tcp_xy[1], support + RELEASE_GAP_M - lo[2]])
+                release = np.array([tcp_xy[0], tcp_xy[1], support + CAVITY_GAP_M - lo[2]])
                 way_in = release - n * (ext_n + CAVITY_ENTRY_M)
                 path = [way_in + (release - way_in) * f for f in np.linspace(0.0, 1.0, 12)]
                 if not all(clear(q) for q in path):
