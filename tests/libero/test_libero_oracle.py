@@ -24,6 +24,13 @@ FAMILIES = [
     ("in + close: mug carried level by its handle into the microwave, door pushed shut",
      "libero_10:KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it", 2000),
     ("on: side grasp, wine bottle onto the rack's sloped top", "libero_goal:put_the_wine_bottle_on_the_rack", 2003),
+    # a release 1 mm from the caddy's divider (the footprint placed by its origin), and a bowl released 1.2 cm up
+    # that landed 3 cm off the plate: both failed before placements were centred by footprint, kept clear of
+    # walls and released 4 mm up
+    ("in: narrow slot, book into the caddy's back compartment",
+     "libero_10:STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy", 2008),
+    ("on: rim pinch set down, bowl from the table centre onto the plate",
+     "libero_spatial:pick_up_the_black_bowl_from_table_center_and_place_it_on_the_plate", 2044),
 ]
 
 
