@@ -86,7 +86,7 @@ def test_same_seed_same_weights(demo_file, tmp_path):
 
 
 def test_resumed_run_ends_with_the_weights_of_an_uninterrupted_one(demo_file, tmp_path):
-    from tcot_hybrid.learning.train import resume_path
+    from tcot_hybrid.learning.train import resume_path, run_finished
 
     quiet = dict(progress=False, log=lambda *_: None)
     whole = train(_cfg(demo_file, tmp_path / "whole.safetensors", max_epochs=3), **quiet)
@@ -95,6 +95,7 @@ def test_resumed_run_ends_with_the_weights_of_an_uninterrupted_one(demo_file, tm
     # the time cap stops the first part after its first epoch: a checkpoint (best so far) and the training state
     train(_cfg(demo_file, out, max_epochs=3, max_minutes=1e-6), log=lines.append, progress=False)
     assert any("time cap" in x and "--resume" in x for x in lines) and resume_path(out).is_file()
+    assert not run_finished(out)
     assert [json.loads(x)["epoch"] for x in out.with_suffix(".metrics.jsonl").read_text().splitlines()] == [1]
     # a stray metrics line of an epoch whose state was never saved (killed in between) is dropped on resume
     with out.with_suffix(".metrics.jsonl").open("a") as fh:
@@ -115,7 +116,7 @@ def test_resumed_run_ends_with_the_weights_of_an_uninterrupted_one(demo_file, tm
     # a finished run is not trained again
     lines.clear()
     again = train(_cfg(demo_file, out, max_epochs=3), resume=True, log=lines.append, progress=False)
-    assert any("nothing left to train" in x for x in lines) and again.epochs == 3
+    assert any("nothing left to train" in x for x in lines) and again.epochs == 3 and run_finished(out)
     assert len(out.with_suffix(".metrics.jsonl").read_text().splitlines()) == 3
     # the command line: --resume continues over an existing checkpoint without --overwrite
     assert cmd_train(["--data", str(demo_file), "--out", str(out), "--threads", "1", "--batch-size", "16",
@@ -245,6 +246,16 @@ def test_example_train_configs_load_and_chain():
     assert shipped["model"]["readout_radius_cells"] == round10.model.readout_radius_cells
     assert shipped["model"]["detect_head"] is True
     assert windows_from_meta(shipped["windows"]) == round10.windows
+
+
+def test_libero_configs_share_model_windows_and_height_reference():
+    """The 50-per-task run (one resumable run from nothing) builds the same network as the two 400-demo runs."""
+    root = Path(__file__).resolve().parent.parent / "examples" / "configs"
+    first, ft, fifty = (load_train_config(root / f"train_libero{x}.yaml") for x in ("", "_finetune", "50"))
+    assert ft.init == first.out and fifty.init is None and fifty.out not in (first.out, ft.out)
+    for c in (ft, fifty):
+        assert (c.model, c.windows, c.height_ref, c.data) == (first.model, first.windows, first.height_ref, first.data)
+    assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):

@@ -88,6 +88,15 @@ def load_resume_state(cfg: TrainConfig, data_hash: str) -> dict | None:
 RESUME_FORMAT = "tcot-train-resume-1"
 
 
+def run_finished(out: str | Path) -> bool:
+    """Whether the run writing checkpoint ``out`` has finished (all its epochs, or an early stop) by its saved
+    training state; False while a part cut by ``max_minutes`` is left to resume (or no state was saved)."""
+    import torch
+
+    path = resume_path(out)
+    return path.is_file() and bool(torch.load(path, map_location="cpu", weights_only=True).get("finished"))
+
+
 def _save_resume_state(cfg: TrainConfig, **state) -> None:
     import os
 
