@@ -131,7 +131,7 @@ class EpisodeRunner:
         self.stack = build_stack(cfg, planner_factory=planner_factory)
         self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
         self.pre_step_hook = pre_step_hook  # called at the start of every planner step, before planning
-        self.supervisor = Supervisor(cfg.supervisor, self.stack.planner)
+        self.supervisor = Supervisor(cfg.supervisor, self.stack.planner, world_kind=self.stack.task.world_kind)
         if cfg.stop_on == "detector" and not self.stack.planner.has_detector:
             from tcot_hybrid.errors import ConfigError
 
@@ -209,7 +209,10 @@ class EpisodeRunner:
                 ex.event(**d.event)
             if d.reset:
                 self._reset_scene()
-            if d.plan_mode is not None:
+            if d.plan is not None:  # the supervisor asked the planner already (confirm_success)
+                if ex.set_plan(d.plan):
+                    self.plans.append(d.plan)
+            elif d.plan_mode is not None:
                 self._plan(step, d.plan_mode)
         for _ in range(self.cfg.timing.ticks_per_plan):
             ex.tick()
@@ -348,6 +351,7 @@ class EpisodeRunner:
             "stop_on": cfg.stop_on, "stopped_by": self.stopped_by,
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
+            "detector_overruled": self.supervisor.overruled,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),
