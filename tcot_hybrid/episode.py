@@ -353,6 +353,7 @@ class EpisodeRunner:
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
+            "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),
             "ik_failures": ex.ik_failures,
