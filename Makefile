@@ -34,8 +34,20 @@ libero: $(VENV)/.libero
 
 setup: $(BIN)/tcot $(VENV)/.libero
 
+# `make demo`: a LIBERO task (libero_object, a sampled development layout: docs/seeds.md) with the learned planner
+# under GLSR, its video with the global (and local) plans drawn; `make demo DEMO=workcell`: the workcell's
+# goal_cube_on_plate with the oracle, as before.
+DEMO ?= libero
+DEMO_LIBERO_TASK ?= libero_object:pick_up_the_alphabet_soup_and_place_it_in_the_basket
 demo: setup
+ifeq ($(DEMO),workcell)
 	$(BIN)/tcot run --task goal_cube_on_plate --seed 0 --video runs/demo/demo.mp4 --out runs/demo
+else ifeq ($(DEMO),libero)
+	$(BIN)/tcot run --task $(DEMO_LIBERO_TASK) --init sampled --seed 20000 --planner learned --supervisor.mode glsr \
+		--video runs/demo/demo.mp4 --out runs/demo
+else
+	@echo "DEMO=$(DEMO) is not a demo; choose DEMO=libero (the default) or DEMO=workcell"; exit 2
+endif
 
 test: setup
 	$(BIN)/python -m pytest

@@ -154,14 +154,14 @@ def surface_z(runner, uv: np.ndarray) -> np.ndarray:
     return cam.unproject(np.stack([u, v], 1).astype(float), z_range)[:, 2]
 
 
-def run_one(task: str, seed: int, mode: str | None, confirm: str = "off") -> dict:
+def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_on: str = "auto") -> dict:
     """One layout: the t = 0 comparison, and with ``mode`` the executed episode and its classification."""
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.planners import Observation
     from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.supervision import SupervisorConfig
 
-    cfg = RunConfig(task=task, seed=seed, init="sampled", planner="learned",
+    cfg = RunConfig(task=task, seed=seed, init="sampled", planner="learned", stop_on=stop_on,
                     supervisor=SupervisorConfig(mode=mode or "global", confirm_success=confirm))
     info: dict = {"task": task, "suite": task.split(":")[0], "seed": seed, "mode": mode,
                   "confirm": confirm if mode and mode.startswith("glsr") else None}
@@ -210,7 +210,8 @@ def run_one(task: str, seed: int, mode: str | None, confirm: str = "off") -> dic
         info["switches"] = compare(pts_o, grip_o, rots_o, pts_l, plan.gripper_closed, plan.tcp_rot, zl, zo)
     if rec is not None:
         w = s.sim.world
-        info.update(success=bool(rec["success"]), fault=rec["fault"], replans=rec["replans"],
+        info.update(success=bool(rec["success"]), fault=rec["fault"], replans=rec["replans"], stop_on=rec["stop_on"],
+                    max_reference_limit_excess_rad=rec.get("max_reference_limit_excess_rad"),
                     stopped_by=rec["stopped_by"], steps_run=rec["steps"],
                     max_joint_limit_violation_rad=rec["max_joint_limit_violation_rad"],
                     plans_rejected=Counter(e["reason"].split(":")[0][:80] for e in rec["events"]
@@ -282,7 +283,7 @@ def label(r: dict) -> str | None:
     (records written before ``confirm_success`` existed ran Algorithm 1 as written: off)."""
     if r["mode"] is None or not r["mode"].startswith("glsr"):
         return r["mode"]
-    return f"{r['mode']} (confirm {r.get('confirm') or 'off'})"
+    return f"{r['mode']} (confirm {r.get('confirm') or 'off'}, stop on {r.get('stop_on') or 'simulator'})"
 
 
 def main() -> None:
@@ -292,6 +293,7 @@ def main() -> None:
     ap.add_argument("--modes", default=None, help="global,glsr: execute the episodes (default: plans only)")
     ap.add_argument("--plans-only", action="store_true", help="compare t = 0 plans only (the default without --modes)")
     ap.add_argument("--confirm", default="off", help="GLSR: supervisor.confirm_success (off, local_plan, auto)")
+    ap.add_argument("--stop-on", default="auto", help="stop_on (auto, simulator, detector, either)")
     ap.add_argument("--out", default=str(HERE / "failures" / "records.jsonl"))
     ap.add_argument("--summarize", action="store_true", help="write failures.json and the docs section, run nothing")
     a = ap.parse_args()
@@ -309,8 +311,12 @@ def main() -> None:
             raise SystemExit(f"--modes {bad[0]!r}: choose from {', '.join(SUPERVISOR_MODES)}")
     from tcot_hybrid.supervision import CONFIRM_SUCCESS
 
+    from tcot_hybrid.run_config import STOP_ON
+
     if a.confirm not in CONFIRM_SUCCESS:
         raise SystemExit(f"--confirm {a.confirm!r}: choose from {', '.join(CONFIRM_SUCCESS)}")
+    if a.stop_on not in STOP_ON:
+        raise SystemExit(f"--stop-on {a.stop_on!r}: choose from {', '.join(STOP_ON)}")
     seeds = parse_seeds(a.seeds)
     out.parent.mkdir(parents=True, exist_ok=True)
     have = {key(json.loads(line)) for line in out.read_text().splitlines()} if out.is_file() else set()
@@ -321,10 +327,11 @@ def main() -> None:
     for task in pick_tasks(a.tasks_per_suite):
         for seed in seeds:
             for mode in modes:
-                want = label({"mode": mode, "confirm": a.confirm})
+                want = label({"mode": mode, "confirm": a.confirm,
+                              "stop_on": ("either" if a.stop_on == "auto" else a.stop_on)})
                 if (task, seed, want) in have:
                     continue
-                r = run_one(task, seed, mode, a.confirm)
+                r = run_one(task, seed, mode, a.confirm, a.stop_on)
                 with out.open("a") as f:
                     f.write(json.dumps(r, default=_default) + "\n")
                 print(f"{task} seed {seed} {mode}: {r.get('cause', '-') if mode else r.get('learned_switches')} "
@@ -414,6 +421,30 @@ def summarize(path: Path) -> None:
                          f"| {np.mean([r.get('detector_overruled', 0) for r in rs]):.1f} "
                          f"| {np.mean([r['replans'] for r in rs]):.1f} | "
                          f"{max(r['max_joint_limit_violation_rad'] for r in rs):.4f} |")
+    glsr = [r for r in eps if r["mode"].startswith("glsr")]
+    if glsr:
+        lines.append("")
+        for mode in sorted({label(r) for r in glsr}):
+            rs = [r for r in glsr if label(r) == mode]
+            calls = sum(r.get("detector_calls", 0) for r in rs)
+            fp = sum(r.get("detector_false_positives", 0) for r in rs)
+            first = [r["first_false_positive_step"] for r in rs if r.get("first_false_positive_step") is not None]
+            lines.append(f"- {mode}: {fp} of {calls} detector calls ({100 * fp / max(calls, 1):.0f} %) judged the task "
+                         f"done while it was not" + (f"; the first such call at planner step {int(np.median(first))} "
+                                                     f"(median over {len(first)} episodes)" if first else "")
+                         + f"; {sum(r['success'] for r in rs)}/{len(rs)} successes.")
+        pairs = {}
+        for r in eps:
+            pairs.setdefault((r["task"], r["seed"]), {})[label(r)] = r["success"]
+        modes = sorted({label(r) for r in eps})
+        both = {k: v for k, v in pairs.items() if len(v) == len(modes)}
+        if both and len(modes) > 1:
+            lines.append(f"- Same layouts in every row ({len(both)}): " + ", ".join(
+                f"{m} {sum(v[m] for v in both.values())}" for m in modes) + " successes.")
+    ref = [r.get("max_reference_limit_excess_rad") for r in eps if r.get("max_reference_limit_excess_rad") is not None]
+    if ref:
+        lines.append(f"- Commanded joint positions past a limit: worst {max(ref):.4f} rad over the {len(ref)} episodes "
+                     f"that record it (measured positions: the table's last column).")
     summary = {"records": len(recs), "lines": lines}
     (HERE / "failures.json").write_text(json.dumps(summary, indent=1) + "\n")
     if lines:
