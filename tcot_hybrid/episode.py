@@ -217,6 +217,8 @@ class EpisodeRunner:
                 if "p_success" in d.event:  # ground truth beside the detector's call, for its metrics
                     d.event["true_success"] = bool(s.task.success(s.sim.world))
                 ex.event(**d.event)
+                if d.event.get("reason") == "detector_overruled":  # the planner says there is work left: a
+                    self._stop_hold = 0  # detector stop (stop_on detector/either) counts its verdicts afresh
             if d.reset:
                 self._reset_scene()
             if d.plan is not None:  # the supervisor asked the planner already (confirm_success)

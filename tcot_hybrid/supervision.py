@@ -56,10 +56,10 @@ class SupervisorConfig:
                        nearly every step: docs/libero-planner.md), off on the workcell (its reporting tables were
                        measured without it).
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
-                       do. Measured on held-out LIBERO frames (docs/libero-planner.md): local plans on success
-                       frames move 3.3 cm (median), on the others 17 cm; at 5 cm 56 % of success frames and 1.7 % of
-                       the others count as still. Up: overrules fewer verdicts (more false successes stand); down:
-                       overrules true ones too (under simulator stopping a true success ends the episode first).
+                       do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
+                       on success frames and on the others). Up: overrules fewer verdicts (more false successes
+                       stand); down: overrules true ones too (a true success then waits for the predicate or the next
+                       verdict; under simulator stopping the predicate ends the episode first).
     """
 
     mode: str = "global"

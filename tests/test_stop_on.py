@@ -105,3 +105,23 @@ def test_auto_is_either_for_glsr_with_a_detector_on_libero_and_simulator_elsewhe
     rec = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=3, planner="learned",
                                   supervisor=SupervisorConfig(mode="glsr"))).run()
     assert rec["stop_on"] == "simulator"  # the workcell: as before
+
+
+def test_a_verdict_the_local_plan_overrules_restarts_the_detector_stop_count():
+    @register_planner("always_done")
+    def _always(ctx):
+        planner = make_planner("learned", ctx)
+        planner.success_probability = lambda obs: 1.0
+        return planner
+
+    try:
+        cfg = dataclasses.replace(_cfg(stop_hold_steps=15), planner="always_done", stop_on="either",
+                                  supervisor=SupervisorConfig(mode="glsr", confirm_success="local_plan"))
+        rec = EpisodeRunner(cfg).run()
+    finally:
+        _FACTORIES.pop("always_done", None)
+    over = [e["step"] for e in rec["events"] if e.get("reason") == "detector_overruled"]
+    assert over, "the learned local plans of goal_cube_in_bowl still move at step 16"
+    checks = {e["step"]: e["hold"] for e in rec["events"] if e["kind"] == "stop_check"}
+    assert all(checks[s + 1] == 1 for s in over if s + 1 in checks)  # counted afresh after each overrule
+    assert rec["detector_overruled"] == len(over)

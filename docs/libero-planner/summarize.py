@@ -212,8 +212,26 @@ def latency_lines() -> list[str]:
             f"{ms('planner_inference_ms_1thread/detect')} |"]
 
 
+def confirm_lines() -> list[str]:
+    p = HERE / "confirm.json"
+    if not p.is_file():
+        return []
+    r = json.loads(p.read_text())
+    rows = [f"| {float(k) * 100:.0f} cm | {v['still_success']:.3f} | {v['still_other']:.3f} | "
+            f"{v['false_verdicts_overruled']} of {r['detector_false_verdicts']} | "
+            f"{v['true_verdicts_overruled']} of {r['detector_true_verdicts']} |" for k, v in r["by_reach"].items()]
+    return ["", f"**Local plans as a check on success verdicts** (`docs/libero-planner/confirm.py` → `confirm.json`; "
+            f"held-out frames, every 2nd: {r['frames']}, {r['success_frames']} of them success frames): a local plan "
+            f"reaches {r['reach_cm_median_success']} cm (median) on success frames and {r['reach_cm_median_other']} cm "
+            f"on the others (AUROC of the reach as a success score {r['reach_auroc']}; the detector's "
+            f"{r['detector_auroc']}). A plan reaching no farther than the bound and switching no gripper is *still*; "
+            f"`supervisor.confirm_motion_m` is 5 cm:", "",
+            "| bound | still on success frames | still on the others | false verdicts (p >= 0.5) overruled | "
+            "true verdicts overruled |", "|---|---|---|---|---|", *rows]
+
+
 def main() -> None:
-    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines()) + "\n"
+    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines() + confirm_lines()) + "\n"
     (HERE / "summary.md").write_text(text)
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-planner", text)
