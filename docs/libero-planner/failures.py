@@ -350,6 +350,34 @@ def _median(xs) -> str:
     return f"{np.median(xs):.1f}" if len(xs) else "-"
 
 
+def depth_lift_lines(first: list[dict]) -> list[str]:
+    """Would the rendered depth at the predicted pixel ("camera geometry") give better grasp heights than the network?
+    The grasp height an RGB-D lift would give: the surface seen at the pixel minus the median depth of oracle grasps
+    below the surface seen at the oracle's own pixel (one offset for all; a rim or a handle is grasped below the
+    top)."""
+    rows = [w for w in first if "depth_surface_z_m" in w]
+    if not rows:
+        return []
+    dz = np.array([w["dz_m"] for w in rows])
+    lat = np.array([w["lateral_m"] for w in rows])
+    z_o = np.array([w["oracle_pos"][2] for w in rows])
+    below = float(np.median(z_o - np.array([w["depth_surface_z_oracle_px_m"] for w in rows])))
+    lift = np.array([w["depth_surface_z_m"] for w in rows]) + below - z_o  # error of the depth-lifted height
+    ceiling = np.array([w["depth_surface_z_oracle_px_m"] for w in rows]) + below - z_o
+    near = lat <= LATERAL_TOL_M
+
+    def cm(x, q=50):
+        return f"{np.percentile(np.abs(x), q) * 100:.1f}" if len(x) else "-"
+
+    return ["", f"Grasp heights from the camera's rendered depth instead of the network ({len(rows)} first grasps; the "
+            f"depth-lifted height is the surface seen at the pixel {below * 100:+.1f} cm, the median offset of oracle "
+            f"grasps from the surface seen at their own pixel): median / p90 height error, network "
+            f"{cm(dz)} / {cm(dz, 90)} cm, depth at the learned pixel {cm(lift)} / {cm(lift, 90)} cm, depth at the oracle's "
+            f"pixel (the ceiling) {cm(ceiling)} / {cm(ceiling, 90)} cm; where the learned grasp is within "
+            f"{LATERAL_TOL_M * 100:.0f} cm sideways ({int(near.sum())}): network {cm(dz[near])} cm, depth "
+            f"{cm(lift[near])} cm.", ""]
+
+
 def summarize(path: Path) -> None:
     from tcot_hybrid.markdown import update_readme_section
 
@@ -396,6 +424,11 @@ def summarize(path: Path) -> None:
         r_bad = sum(w["lateral_m"] <= LATERAL_TOL_M and abs(w["dz_m"]) <= HEIGHT_TOL_M
                     and w.get("rot_deg", 0) > ROT_TOL_DEG for w in first)
         lines.append("")
+        refused = Counter((r["task"].split(":")[1], "a waypoint below the floor (learned.min_height_m)"
+                           if "lowest allowed" in r["refused"] else r["refused"][:80]) for r in plans if r.get("refused"))
+        lines += ["", f"t = 0 plans refused by the planner's output checks: {sum(refused.values())} of {len(plans)}"
+                  + "".join(f"; {n} x {task}: {why}" for (task, why), n in refused.items()) + "."]
+        lines += depth_lift_lines(first)
         lines.append(f"First grasps outside a tolerance, first failing check ({len(first)} with a matching grasp; "
                      f"{len(plans) - len(first)} plans without one): lateral > {LATERAL_TOL_M * 100:.0f} cm "
                      f"{lat_bad}, else height > {HEIGHT_TOL_M * 100:.1f} cm {h_bad}, else orientation > "

@@ -304,14 +304,19 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
 
 def lowest_tcp_by_camera(frames) -> list[dict]:
     """Per planner camera of ``frames`` (its position), the lowest labelled TCP height of its imitated frames (global
-    and local labels, measured like the network's heights): where ``learned.min_height_m`` is counted from on a
-    ``height_ref: camera`` checkpoint (:func:`tcot_hybrid.planners.learned.lowest_plan_height`)."""
+    and local labels, measured like the network's heights) and, where the demonstrations recorded it, the support
+    surface under that camera (``support_z_m``, from the camera like the heights): where ``learned.min_height_m`` is
+    counted from on a ``height_ref: camera`` checkpoint (:func:`tcot_hybrid.planners.learned.lowest_plan_height`)."""
     out = []
+    supports = getattr(frames, "camera_support_z", None) or [None] * len(frames.cameras)
     for c in np.unique(frames.cam[frames.traj]):
         sel = np.flatnonzero(frames.traj & (frames.cam == c))
         low = min(float(frames.g_z.numpy()[sel].min()), float(frames.l_z.numpy()[sel].min()))
         pos = np.asarray(frames.cameras[c].T_world_cam, dtype=float)[:3, 3]
-        out.append({"camera_pos_m": [round(float(x), 4) for x in pos], "lowest_z_m": round(low, 4)})
+        entry = {"camera_pos_m": [round(float(x), 4) for x in pos], "lowest_z_m": round(low, 4)}
+        if supports[c] is not None:
+            entry["support_z_m"] = round(float(supports[c]) - float(pos[2]), 4)
+        out.append(entry)
     return out
 
 
