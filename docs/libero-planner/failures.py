@@ -441,9 +441,9 @@ def summarize(path: Path) -> None:
         lines.append("")
         causes = sorted({r.get("cause") or "success" for r in eps})
         lines.append("| mode | episodes | " + " | ".join(causes) + " | episodes with detector false positives "
-                     "| ended waiting on one | verdicts overruled / episode | replans / episode | worst joint-limit "
-                     "excess [rad] |")
-        lines.append("|---|---|" + "---|" * len(causes) + "---|---|---|---|---|")
+                     "| ended waiting on one | ended by the detector (not done) | verdicts overruled / episode "
+                     "| replans / episode | mean episode [planner steps] | worst joint-limit excess [rad] |")
+        lines.append("|---|---|" + "---|" * len(causes) + "---|---|---|---|---|---|---|")
         for mode in sorted({label(r) for r in eps}):
             rs = [r for r in eps if label(r) == mode]
             c = Counter(r.get("cause") or "success" for r in rs)
@@ -451,8 +451,9 @@ def summarize(path: Path) -> None:
             wait = sum(bool(r.get("ended_waiting_on_false_positive")) for r in rs)
             lines.append(f"| {mode} | {len(rs)} | " + " | ".join(str(c.get(k, 0)) for k in causes)
                          + f" | {fp if mode.startswith('glsr') else '-'} | {wait if mode.startswith('glsr') else '-'} "
+                         f"| {sum(r.get('stopped_by') == 'detector' for r in rs) if mode.startswith('glsr') else '-'} "
                          f"| {np.mean([r.get('detector_overruled', 0) for r in rs]):.1f} "
-                         f"| {np.mean([r['replans'] for r in rs]):.1f} | "
+                         f"| {np.mean([r['replans'] for r in rs]):.1f} | {np.mean([r['steps_run'] for r in rs]):.0f} | "
                          f"{max(r['max_joint_limit_violation_rad'] for r in rs):.4f} |")
     glsr = [r for r in eps if r["mode"].startswith("glsr")]
     if glsr:
@@ -474,6 +475,11 @@ def summarize(path: Path) -> None:
         if both and len(modes) > 1:
             lines.append(f"- Same layouts in every row ({len(both)}): " + ", ".join(
                 f"{m} {sum(v[m] for v in both.values())}" for m in modes) + " successes.")
+        for m in modes:
+            pair = [v for v in pairs.values() if m in v and "global" in v]
+            if m != "global" and len(pair) > len(both):
+                lines.append(f"- Layouts run both global-only and {m} ({len(pair)}): global {sum(v['global'] for v in pair)}, "
+                             f"{m} {sum(v[m] for v in pair)} successes; both {sum(v['global'] and v[m] for v in pair)}.")
     ref = [r.get("max_reference_limit_excess_rad") for r in eps if r.get("max_reference_limit_excess_rad") is not None]
     if ref:
         lines.append(f"- Commanded joint positions past a limit: worst {max(ref):.4f} rad over the {len(ref)} episodes "
