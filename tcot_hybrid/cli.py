@@ -241,7 +241,7 @@ def run_notes(record: dict) -> list[str]:
     elif record.get("perturbation_fired"):
         step = next((e.get("step") for e in record.get("events", []) if e.get("kind") == "perturbation"), None)
         notes.append(f"perturbation {record['perturb']} fired at planner step {step}")
-    if record.get("stop_on") == "detector":
+    if record.get("stop_on") in ("detector", "either") and record.get("stopped_by") != "simulator":
         notes.append(f"stopped by {record.get('stopped_by')}; the success predicate on the final state says "
                      f"{'success' if record['success'] else 'failure'}"
                      + (" (premature stop)" if record.get("premature_stop") else ""))
@@ -332,7 +332,7 @@ def cmd_eval(argv: list[str]) -> int:
     tot = sum(c["successes"] for c in result["cells"])
     print(f"{tot}/{result['episodes']} episodes succeeded across {len(result['cells'])} cells in "
           f"{result['wall_time_s']:.1f}s with {cmd.workers} workers -> {cmd.out / 'eval.json'}")
-    if cmd.cfg.stop_on == "detector":
+    if any(c.get("stop_on") in ("detector", "either") for c in result["cells"]):
         print(f"stopped by the detector: premature stops {sum(c['premature_stops'] for c in result['cells'])} "
               f"of {result['episodes']} episodes")
     for planner, d in (result.get("detector") or {}).items():

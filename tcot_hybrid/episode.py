@@ -119,6 +119,20 @@ def reach_warnings(stack: Stack) -> list[dict]:
         return []
 
 
+def resolve_stop_on(cfg: RunConfig, task: Task, planner: Planner) -> str:
+    """The episode's ``stop_on`` with "auto" resolved (see :class:`RunConfig`); ConfigError when "detector" or
+    "either" is asked of a planner without a failure detector."""
+    if cfg.stop_on == "auto":
+        glsr = cfg.supervisor.mode.startswith("glsr")
+        return "either" if glsr and planner.has_detector and task.world_kind == "libero" else "simulator"
+    if cfg.stop_on in ("detector", "either") and not planner.has_detector:
+        from tcot_hybrid.errors import ConfigError
+
+        raise ConfigError(f"stop_on = {cfg.stop_on!r} needs a planner with a failure detector; planner "
+                          f"{cfg.planner!r} has none (use stop_on = 'simulator', or a learned planner)")
+    return cfg.stop_on
+
+
 class EpisodeRunner:
     """Runs one episode step by step (the CLI, the evaluator, the bench and the examples share it).
 
@@ -131,12 +145,8 @@ class EpisodeRunner:
         self.stack = build_stack(cfg, planner_factory=planner_factory)
         self.frame_hook = frame_hook  # called after every planner step: frame_hook(runner, step)
         self.pre_step_hook = pre_step_hook  # called at the start of every planner step, before planning
-        self.supervisor = Supervisor(cfg.supervisor, self.stack.planner)
-        if cfg.stop_on == "detector" and not self.stack.planner.has_detector:
-            from tcot_hybrid.errors import ConfigError
-
-            raise ConfigError(f"stop_on = 'detector' needs a planner with a failure detector; planner "
-                              f"{cfg.planner!r} has none (use stop_on = 'simulator', or a learned planner)")
+        self.supervisor = Supervisor(cfg.supervisor, self.stack.planner, world_kind=self.stack.task.world_kind)
+        self.stop_on = resolve_stop_on(cfg, self.stack.task, self.stack.planner)  # "auto" made concrete
         self.perturbation = make_perturbation(cfg.perturb, cfg.seed)
         self.perturbation_note = self._perturbation_note()
         self.steps = 0
@@ -207,9 +217,14 @@ class EpisodeRunner:
                 if "p_success" in d.event:  # ground truth beside the detector's call, for its metrics
                     d.event["true_success"] = bool(s.task.success(s.sim.world))
                 ex.event(**d.event)
+                if d.event.get("reason") == "detector_overruled":  # the planner says there is work left: a
+                    self._stop_hold = 0  # detector stop (stop_on detector/either) counts its verdicts afresh
             if d.reset:
                 self._reset_scene()
-            if d.plan_mode is not None:
+            if d.plan is not None:  # the supervisor asked the planner already (confirm_success)
+                if ex.set_plan(d.plan):
+                    self.plans.append(d.plan)
+            elif d.plan_mode is not None:
                 self._plan(step, d.plan_mode)
         for _ in range(self.cfg.timing.ticks_per_plan):
             ex.tick()
@@ -262,8 +277,8 @@ class EpisodeRunner:
         return self._stop_hold >= cfg.stop_hold_steps
 
     def run(self, progress=None, *, steps_after_success: int = 0, probe_detector: bool = False) -> dict:
-        """Run until the episode ends: the task's success predicate holds (``stop_on`` simulator) or the failure
-        detector says so (``stop_on`` detector; success is then the predicate on the final state), the time
+        """Run until the episode ends: the task's success predicate holds (``stop_on`` simulator or either) or the
+        failure detector says so (``stop_on`` detector or either; success is then the predicate on the final state), the time
         limit, or a fault. ``steps_after_success`` keeps stepping (the arm holds its last plan) a few planner
         steps past a simulator-judged success, e.g. to record success frames; with ``probe_detector`` the
         planner's failure detector is asked at each of those steps (its false-alarm rate is measured on them)."""
@@ -271,7 +286,8 @@ class EpisodeRunner:
         t0 = time.perf_counter()
         max_steps = self.max_steps
         self.perturbation_note = self._perturbation_note()  # the time limit may have been changed since __init__
-        by_detector = cfg.stop_on == "detector"
+        by_detector = self.stop_on == "detector"
+        either = self.stop_on == "either"
         for w in self.reach_warnings:
             s.executor.event("unreachable_target", **w)
         self.settle()
@@ -290,17 +306,16 @@ class EpisodeRunner:
                     s.executor.event("sim_fault", warning=s.sim.fault.warning, count=s.sim.fault.count)
                     self.stopped_by = "fault"
                     break
-                if by_detector:
-                    if step < max_steps and self._detector_stop(step):
-                        self.stopped_by = "detector"
-                        break
-                elif s.task.success(s.sim.world):
+                if not by_detector and s.task.success(s.sim.world):
                     self.success = True
                     self.stopped_by = "simulator"
                     break
+                if (by_detector or either) and step < max_steps and self._detector_stop(step):
+                    self.stopped_by = "detector"
+                    break
             if self.stopped_by is None:
                 self.stopped_by = "time_limit"
-            if by_detector and self.fault is None:
+            if (by_detector or self.stopped_by == "detector") and self.fault is None:
                 self.success = bool(s.task.success(s.sim.world))  # judged afterwards, on the state it stopped in
             self.success_time_s = s.sim.time_s if self.success else None
             for _ in range(steps_after_success if self.success and not by_detector else 0):
@@ -345,10 +360,12 @@ class EpisodeRunner:
             "sim_time_s": round(s.sim.time_s, 4), "wall_time_s": round(wall_time_s, 4),
             "steps": self.steps, "plans": len(self.plans), "perturb": cfg.perturb.name,
             **self.perturbation_summary(),
-            "stop_on": cfg.stop_on, "stopped_by": self.stopped_by,
+            "stop_on": self.stop_on, "stopped_by": self.stopped_by,
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
+            "detector_overruled": self.supervisor.overruled,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
+            "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),
             "max_velocity_ratio": float(ex.max_velocity_ratio),
             "max_tracking_error_rad": float(ex.tracking_err_max),
             "ik_failures": ex.ik_failures,

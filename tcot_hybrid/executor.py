@@ -162,7 +162,8 @@ class MotionExecutor:
         self._plan_q: np.ndarray | None = None  # joint targets of the current plan from a whole-plan solve
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
-        self.max_joint_limit_violation = 0.0
+        self.max_joint_limit_violation = 0.0  # measured joint positions past [q_min, q_max] [rad]
+        self.max_reference_limit_excess = 0.0  # commanded (reference) positions past them [rad]: should stay 0
         self.max_velocity_ratio = 0.0
         self._q_min, self._q_max, self._v_max = sim.robot.q_min, sim.robot.q_max, sim.robot.v_max
 
@@ -204,7 +205,7 @@ class MotionExecutor:
                 self.smoother.reset(q, self.sim.qd)
             except TrajectoryError as exc:  # e.g. pushed slightly past a soft joint limit: brake from there
                 self.event("reference_brake", reason=str(exc))
-                self.smoother.brake(q, self.sim.qd)
+                self._brake_from_measured(q, self.sim.qd, "resync")
             self._ik_seed = q
         self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan),
                    corners_added=len(points) - len(plan))
@@ -351,6 +352,9 @@ class MotionExecutor:
         (this is what the bench compares with bare mj_step)."""
         sim, dyn = self.sim, self.dyn
         ref = self.smoother.step()
+        over = max((self._q_min - ref.q).max(), (ref.q - self._q_max).max())  # the command, not the measurement
+        if over > self.max_reference_limit_excess:
+            self.max_reference_limit_excess = float(over)
         sim.step1()
         dyn.update()
         c = self.controller
@@ -381,12 +385,27 @@ class MotionExecutor:
         if limit is not None and err > limit:
             self._tracking_reflex(int(dev.argmax()), float(err), limit)
 
+    def _brake_from_measured(self, q: np.ndarray, qd: np.ndarray, why: str) -> None:
+        """Stop the reference from the measured state, never past a joint limit: a stop from (q, qd) that would
+        leave [q_min, q_max] (a joint moving toward a limit it is near, or already pressed past a soft limit) is
+        replaced by the reference at rest at the measured posture, each joint brought inside its limits, and the
+        event ``reference_stopped_inside_limits`` records by how much (nothing is moved silently)."""
+        info = self.smoother.brake(q, qd)
+        if info.limit_excursion_rad <= 0.0:
+            return
+        hold = np.minimum(np.maximum(q, self._q_min), self._q_max)
+        moved = np.abs(hold - q)
+        self.smoother.reset(hold)
+        self.event("reference_stopped_inside_limits", reason=why, stop_excursion_rad=round(info.limit_excursion_rad, 5),
+                   joint=self.sim.robot.arm_joints[int(moved.argmax())] if moved.max() > 0 else None,
+                   moved_inside_rad=round(float(moved.max()), 5))
+
     def _tracking_reflex(self, joint: int, err: float, limit: float) -> None:
         """Stop pushing: drop the plan, brake the reference from the measured state (see ExecutorConfig)."""
         self.tracking_reflexes += 1
         self.event("tracking_reflex", joint=self.sim.robot.arm_joints[joint], error_rad=round(err, 4),
                    limit_rad=limit, waypoint=self.index)
-        self.smoother.brake(self.sim.q, self.sim.qd)
+        self._brake_from_measured(self.sim.q, self.sim.qd, "tracking_reflex")
         self._ik_seed = self.sim.q
         self.phase = "done"
         self._arrived_at = self._waiting_at = None  # a replan to the same stop point starts a fresh wait

@@ -28,7 +28,7 @@ from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.smoothing import SmoothingConfig
 from tcot_hybrid.supervision import SupervisorConfig
 
-STOP_ON = ("simulator", "detector")
+STOP_ON = ("auto", "simulator", "detector", "either")
 INIT_MODES = ("shipped", "sampled")
 
 
@@ -43,11 +43,16 @@ class RunConfig:
         seed mod N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
         task's default (LIBERO: shipped; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
-    stop_on: what ends the episode before its time limit. "simulator" (default): the task's success predicate
+    stop_on: what ends the episode before its time limit. "simulator": the task's success predicate
         (privileged; what a benchmark uses). "detector": the planner's failure detector, once it has judged the
         task successful (p >= supervisor.success_threshold) on ``stop_hold_steps`` consecutive planner steps,
         asked every step from ``supervisor.t_f`` on; success is judged afterwards by the predicate on the final
         state, and a stop the predicate does not confirm is a premature stop. Needs a planner with a detector.
+        "either": whichever comes first: the predicate (a success, as with "simulator") or the detector's stop
+        (the robot has declared the task done; success is the predicate then, so a false verdict is a failure
+        and a premature stop instead of an arm idling to the time limit). "auto" (default): "either" for a GLSR
+        mode with a detector on LIBERO (its demonstration-trained detector calls unfinished tasks done:
+        docs/libero-planner.md), "simulator" everywhere else (the workcell's tables were measured so).
     stop_hold_steps: consecutive "successful" detector calls that end a detector-stopped episode. Up: fewer
         premature stops, longer episodes; down: stops sooner. Default 15 (1.5 s) by measurement on tuning seeds
         500-504 (learned GLSR, 60 episodes): premature stops 11 at 3, 5 at 10, 2 at 15 and at 20; the detector
@@ -66,7 +71,7 @@ class RunConfig:
     planner: str = "oracle"
     checkpoint: str | None = None
     init: str | None = None
-    stop_on: str = "simulator"
+    stop_on: str = "auto"
     stop_hold_steps: int = 15
     controller_params: dict[str, float] = field(default_factory=dict)
     timing: TimingConfig = field(default_factory=TimingConfig)

@@ -12,6 +12,13 @@ Modes
   scene is reset to its initial state and the task is retried with local plans.
 A planner with ``replan_every_step`` (the direct-action baseline) is asked every step whatever the mode.
 Every decision is returned as an event (step, state, success probability, replan reason).
+
+A detector that calls an unfinished task done leaves Algorithm 1 following a finished plan until the time limit
+(LIBERO, a detector trained on demonstrations only: docs/libero-planner.md, "Failure analysis"). With
+``confirm_success`` the planner's own local prompt must agree: at the local period, a success verdict is checked
+against a local plan from the same image, and a plan that still moves the hand (``confirm_motion_m``) or switches the
+gripper overrules it: the plan is followed like any local replan (reason ``detector_overruled``). Non-privileged: the
+network's two outputs on the same observation, nothing from the simulator.
 """
 from __future__ import annotations
 
@@ -21,6 +28,7 @@ from typing import NamedTuple
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
+CONFIRM_SUCCESS = ("auto", "off", "local_plan")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,6 +49,17 @@ class SupervisorConfig:
     max_resets:        glsr_reset only: how many times the scene may be reset.
     max_plan_latency_s: wall-clock budget for one planner call [s]; a plan that arrives later is stale
                        and dropped (the last valid plan is kept). None = no budget.
+    confirm_success:   glsr modes: "off" (Algorithm 1 as written: a success verdict is trusted), "local_plan" (at the
+                       local period a success verdict stands only when a local plan from the same image keeps the
+                       hand within ``confirm_motion_m`` and switches no gripper; else that plan is followed), or
+                       "auto": local_plan on LIBERO (its detector saw no rollouts and called unfinished tasks done on
+                       nearly every step: docs/libero-planner.md), off on the workcell (its reporting tables were
+                       measured without it).
+    confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
+                       do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
+                       on success frames and on the others). Up: overrules fewer verdicts (more false successes
+                       stand); down: overrules true ones too (a true success then waits for the predicate or the next
+                       verdict; under simulator stopping the predicate ends the episode first).
     """
 
     mode: str = "global"
@@ -50,9 +69,13 @@ class SupervisorConfig:
     geometric_checks: bool = False
     max_resets: int = 1
     max_plan_latency_s: float | None = 1.0
+    confirm_success: str = "auto"
+    confirm_motion_m: float = 0.05
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
+        require_choice("supervisor.confirm_success", self.confirm_success, CONFIRM_SUCCESS)
+        require_positive("supervisor.confirm_motion_m", self.confirm_motion_m)
         require_int("supervisor.t_f", self.t_f, minimum=0)
         require_int("supervisor.t_l", self.t_l, minimum=1)
         require_positive("supervisor.success_threshold", self.success_threshold)
@@ -69,13 +92,17 @@ class Decision(NamedTuple):
     plan_mode: str | None  # "global" | "local" | "direct" | None (keep following)
     reset: bool            # glsr_reset: restore the initial scene before planning
     event: dict | None
+    plan: object = None    # a plan the supervisor already asked for (confirm_success): follow it, do not ask again
 
 
 class Supervisor:
     """Decides, at the start of each planner step, whether and how to (re)plan."""
 
-    def __init__(self, config: SupervisorConfig, planner):
+    def __init__(self, config: SupervisorConfig, planner, *, world_kind: str = "workcell"):
         self.cfg, self.planner = config, planner
+        self.confirm = config.confirm_success == "local_plan" or (config.confirm_success == "auto"
+                                                                  and world_kind == "libero")
+        self.overruled = 0
         self.state = "start"
         self.resets = 0
         self.replans = 0
@@ -115,6 +142,14 @@ class Supervisor:
         successful = (not rejected) and p >= cfg.success_threshold
         if self.state == "global_follow":
             self.state = "detect"
+        if successful and self.confirm and step % cfg.t_l == 0:
+            plan, motion = self._disagreeing_local_plan(observe, executor)
+            if plan is not None:
+                self.state, self.overruled, self.replans = "local_follow", self.overruled + 1, self.replans + 1
+                self._ik_failures_at_plan = executor.ik_failures
+                self._infeasible_at_plan = getattr(executor, "plans_infeasible", 0)
+                ev = self._event(step, p=p, reason="detector_overruled", plan="local")
+                return Decision("local", False, {**ev, "plan_motion_m": round(motion, 4)}, plan)
         if successful:
             return Decision(None, False, self._event(step, p=p, reason="judged_successful"))
         if step % cfg.t_l == 0 or geometric is not None:
@@ -151,6 +186,33 @@ class Supervisor:
         self._ik_failures_at_plan = executor.ik_failures
         self._infeasible_at_plan = getattr(executor, "plans_infeasible", 0)
         return Decision(mode, False, self._event(step, reason=reason, plan=mode))
+
+    def _disagreeing_local_plan(self, observe, executor):
+        """(a local plan from the current image, how far it reaches [m]) when it still moves the hand farther than
+        ``confirm_motion_m`` from its first waypoint or switches the gripper, else (None, 0): the success verdict
+        stands. A refused plan (PlanningError, LiftError) or a stale one (``max_plan_latency_s``) leaves the verdict
+        standing too."""
+        import numpy as np
+
+        from tcot_hybrid.errors import LiftError, PlanningError
+
+        import time
+
+        obs = observe()
+        t0 = time.perf_counter()
+        try:
+            plan = self.planner.plan(obs, mode="local")
+            pts = executor.camera.unproject(plan.uv_px, plan.depth_m)
+        except (PlanningError, LiftError):
+            return None, 0.0
+        budget = self.cfg.max_plan_latency_s
+        if budget is not None and time.perf_counter() - t0 > budget:  # stale, like any late plan: not followed
+            return None, 0.0
+        motion = float(np.linalg.norm(pts - pts[0], axis=1).max())
+        grip = np.asarray(plan.gripper_closed, bool)
+        if motion > self.cfg.confirm_motion_m or bool((grip != grip[0]).any()):
+            return plan, motion
+        return None, motion
 
     def _geometric_reason(self, executor) -> str | None:
         if getattr(executor, "plans_infeasible", 0) > self._infeasible_at_plan:

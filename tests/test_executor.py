@@ -138,3 +138,45 @@ def test_switch_threshold_is_checked_and_can_be_switched_off():
     pts, _ = square_transits(start, True, points, np.array([False]), min_horizontal_m=None, min_vertical_m=V,
                              switch_min_horizontal_m=None)
     np.testing.assert_array_equal(pts, points)
+
+
+def test_a_reflex_brake_near_a_joint_limit_never_commands_past_it():
+    """The tracking reflex brakes the reference from the measured state; a joint moving fast toward a limit it is
+    near would stop beyond it. The reference then rests at the measured posture inside the limits instead, the
+    event says so, and the commanded positions of every tick stay inside [q_min, q_max] (recorded per episode)."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0))
+    r.settle()
+    ex, sim = r.stack.executor, r.stack.sim
+    j = 3  # joint 4: its upper limit (-0.07 rad) is the one nearest a working posture
+    adr = sim.model.joint(sim.robot.arm_joints[j]).qposadr[0]
+    dof = sim.model.joint(sim.robot.arm_joints[j]).dofadr[0]
+    sim.data.qpos[adr] = sim.robot.q_max[j] - 0.004
+    sim.data.qvel[dof] = 0.8 * sim.robot.v_max[j]  # toward the limit: no stop fits in 4 mrad
+    import mujoco
+
+    mujoco.mj_forward(sim.model, sim.data)
+    assert ex.smoother.brake(sim.q, sim.qd).limit_excursion_rad > 0  # what a plain brake would command
+    ex._tracking_reflex(j, 0.3, 0.25)
+    ev = [e for e in ex.events if e["kind"] == "reference_stopped_inside_limits"]
+    assert len(ev) == 1 and ev[0]["reason"] == "tracking_reflex" and ev[0]["stop_excursion_rad"] > 0
+    ahead = ex.smoother.preview(200)
+    assert np.all(ahead <= sim.robot.q_max + 1e-12) and np.all(ahead >= sim.robot.q_min - 1e-12)
+    for _ in range(50):
+        ex.tick()
+    rec = r.record(0.0)
+    assert rec["max_reference_limit_excess_rad"] == 0.0
+
+
+def test_a_reflex_brake_away_from_the_limits_stops_from_the_measured_state():
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0))
+    r.settle()
+    ex, sim = r.stack.executor, r.stack.sim
+    ex._tracking_reflex(0, 0.3, 0.25)
+    assert not [e for e in ex.events if e["kind"] == "reference_stopped_inside_limits"]
+    np.testing.assert_allclose(ex.smoother.reference.q, sim.q)

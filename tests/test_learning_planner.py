@@ -426,6 +426,11 @@ def test_camera_referenced_checkpoints_bound_heights_from_their_demonstrations(c
     assert z == pytest.approx(cam_pos[2] - 0.90 - 0.02) and "none within 10 cm" in note  # unknown camera: loosest
     assert lowest_plan_height({"height_ref": "world"}, camera, -0.02) == (-0.02, "learned.min_height_m; table top at 0")
     assert lowest_plan_height({"height_ref": "camera"}, camera, -0.03)[0] == -0.03  # written before the record
+    # checkpoints that record the support surface under each camera count from it (the table top, as on the workcell)
+    with_support = {"height_ref": "camera", "lowest_tcp_by_camera": [
+        {**e, "support_z_m": e["lowest_z_m"] - 0.03} for e in meta["lowest_tcp_by_camera"]]}
+    z, note = lowest_plan_height(with_support, camera, -0.02)
+    assert z == pytest.approx(cam_pos[2] - 0.43 - 0.02) and "support surface" in note and "under this camera" in note
     with pytest.raises(PlanningError, match=r"waypoint 0 has TCP height z_m = 0.3000 m.*lowest allowed 0.3800 m "
                                             r"\(learned.min_height_m -0.02 m from the lowest TCP height"):
         check_outputs(np.zeros((1, 2)), np.array([0.3]), np.array([0.5]), min_height_m=0.38,

@@ -85,6 +85,59 @@ def test_same_seed_same_weights(demo_file, tmp_path):
     assert all(torch.equal(wa[k], wb[k]) for k in wa)
 
 
+def test_resumed_run_ends_with_the_weights_of_an_uninterrupted_one(demo_file, tmp_path):
+    from tcot_hybrid.learning.train import resume_path, run_finished
+
+    quiet = dict(progress=False, log=lambda *_: None)
+    whole = train(_cfg(demo_file, tmp_path / "whole.safetensors", max_epochs=3), **quiet)
+    out = tmp_path / "parts.safetensors"
+    lines: list[str] = []
+    # the time cap stops the first part after its first epoch: a checkpoint (best so far) and the training state
+    train(_cfg(demo_file, out, max_epochs=3, max_minutes=1e-6), log=lines.append, progress=False)
+    assert any("time cap" in x and "--resume" in x for x in lines) and resume_path(out).is_file()
+    assert not run_finished(out)
+    assert [json.loads(x)["epoch"] for x in out.with_suffix(".metrics.jsonl").read_text().splitlines()] == [1]
+    # a stray metrics line of an epoch whose state was never saved (killed in between) is dropped on resume
+    with out.with_suffix(".metrics.jsonl").open("a") as fh:
+        fh.write(json.dumps({"epoch": 2, "stray": True}) + "\n")
+    # a different config is refused, naming the field; max_minutes may change
+    with pytest.raises(ConfigError, match=r"lr = 0.003.*lr = 0.001"):
+        train(_cfg(demo_file, out, max_epochs=3, lr=1e-3), resume=True, **quiet)
+    lines.clear()
+    res = train(_cfg(demo_file, out, max_epochs=3, max_minutes=1e-6), resume=True, log=lines.append, progress=False)
+    assert any("resumed" in x and "after epoch 1 of 3" in x for x in lines) and res.epochs == 2
+    res = train(_cfg(demo_file, out, max_epochs=3), resume=True, **quiet)  # the rest
+    recs = [json.loads(x) for x in out.with_suffix(".metrics.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in recs] == [1, 2, 3] and not any(r.get("stray") for r in recs)
+    wa, wb = load_file(whole.checkpoint), load_file(res.checkpoint)
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)  # same weights as the run that was never cut
+    whole_recs = [json.loads(x) for x in (tmp_path / "whole.metrics.jsonl").read_text().splitlines()]
+    assert [r["val"] for r in recs] == [r["val"] for r in whole_recs]
+    # a finished run is not trained again
+    lines.clear()
+    again = train(_cfg(demo_file, out, max_epochs=3), resume=True, log=lines.append, progress=False)
+    assert any("nothing left to train" in x for x in lines) and again.epochs == 3 and run_finished(out)
+    assert len(out.with_suffix(".metrics.jsonl").read_text().splitlines()) == 3
+    # the command line: --resume continues over an existing checkpoint without --overwrite
+    assert cmd_train(["--data", str(demo_file), "--out", str(out), "--threads", "1", "--batch-size", "16",
+                      "--max-epochs", "3", "--stage1-epochs", "1", "--patience", "10", "--val-max-frames", "64",
+                      "--model.width", "8", "--no-bf16", "--resume"]) == 0
+
+
+def test_resume_refuses_changed_data_and_unreadable_state(demo_file, tmp_path, camera):
+    out = tmp_path / "r.safetensors"
+    train(_cfg(demo_file, out, max_epochs=2, max_minutes=1e-6), progress=False, log=lambda *_: None)
+    other = tmp_path / "more.hdf5"
+    make_demo_file(other, camera, seeds=range(14), T=24)
+    with pytest.raises(ConfigError, match=r"data = .*demos.hdf5.*more.hdf5"):
+        train(_cfg(other, out, max_epochs=2), resume=True, progress=False, log=lambda *_: None)
+    from tcot_hybrid.learning.train import resume_path
+
+    resume_path(out).write_bytes(b"not a state")
+    with pytest.raises(ConfigError, match="cannot read the training state.*delete it"):
+        train(_cfg(demo_file, out, max_epochs=2), resume=True, progress=False, log=lambda *_: None)
+
+
 def test_direct_kind_trains(demo_file, tmp_path, camera):
     cfg = _cfg(demo_file, tmp_path / "d.safetensors", kind="direct", max_epochs=2)
     assert cfg.model.kind == "direct"
@@ -193,6 +246,16 @@ def test_example_train_configs_load_and_chain():
     assert shipped["model"]["readout_radius_cells"] == round10.model.readout_radius_cells
     assert shipped["model"]["detect_head"] is True
     assert windows_from_meta(shipped["windows"]) == round10.windows
+
+
+def test_libero_configs_share_model_windows_and_height_reference():
+    """The 50-per-task run (one resumable run from nothing) builds the same network as the two 400-demo runs."""
+    root = Path(__file__).resolve().parent.parent / "examples" / "configs"
+    first, ft, fifty = (load_train_config(root / f"train_libero{x}.yaml") for x in ("", "_finetune", "50"))
+    assert ft.init == first.out and fifty.init is None and fifty.out not in (first.out, ft.out)
+    for c in (ft, fifty):
+        assert (c.model, c.windows, c.height_ref, c.data) == (first.model, first.windows, first.height_ref, first.data)
+    assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):

@@ -55,9 +55,73 @@ def test_simulator_stopping_is_unchanged_and_records_how_it_stopped():
 
 
 def test_stop_on_is_validated():
-    with pytest.raises(ConfigError, match="stop_on = 'both' is not valid; choose one of simulator, detector"):
+    with pytest.raises(ConfigError, match="stop_on = 'both' is not valid; choose one of auto, simulator, detector, either"):
         RunConfig(stop_on="both")
     with pytest.raises(ConfigError, match="stop_hold_steps"):
         RunConfig(stop_hold_steps=0)
-    with pytest.raises(ConfigError, match="planner 'oracle' has none"):
-        EpisodeRunner(RunConfig(task="goal_cube_in_bowl", stop_on="detector"))
+    for asked in ("detector", "either"):
+        with pytest.raises(ConfigError, match=f"stop_on = '{asked}' needs.*planner 'oracle' has none"):
+            EpisodeRunner(RunConfig(task="goal_cube_in_bowl", stop_on=asked))
+
+
+def test_either_ends_at_the_predicate_or_at_the_detector_whichever_comes_first():
+    rec = EpisodeRunner(dataclasses.replace(_cfg(), stop_on="either")).run()  # the predicate holds first here
+    assert rec["stop_on"] == "either" and rec["success"] and rec["stopped_by"] == "simulator"
+    assert not rec["premature_stop"]
+
+    @register_planner("always_done")
+    def _always(ctx):
+        planner = make_planner("learned", ctx)
+        planner.success_probability = lambda obs: 1.0
+        return planner
+
+    try:
+        rec = EpisodeRunner(dataclasses.replace(_cfg(stop_hold_steps=2), planner="always_done", stop_on="either")).run()
+    finally:
+        _FACTORIES.pop("always_done", None)
+    assert rec["stopped_by"] == "detector" and rec["steps"] == 17  # checks at 16, 17: not idling to the time limit
+    assert not rec["success"] and rec["premature_stop"]
+
+
+def test_auto_is_either_for_glsr_with_a_detector_on_libero_and_simulator_elsewhere():
+    from tcot_hybrid.episode import resolve_stop_on
+
+    class Task:
+        def __init__(self, world):
+            self.world_kind = world
+
+    class Planner:
+        def __init__(self, detector):
+            self.has_detector = detector
+
+    def resolved(world, detector=True, mode="glsr", stop_on="auto"):
+        cfg = RunConfig(task="goal_cube_in_bowl", stop_on=stop_on, supervisor=SupervisorConfig(mode=mode))
+        return resolve_stop_on(cfg, Task(world), Planner(detector))
+
+    assert RunConfig().stop_on == "auto"
+    assert resolved("libero") == "either" and resolved("libero", mode="glsr_reset") == "either"
+    assert resolved("workcell") == "simulator" and resolved("libero", detector=False) == "simulator"
+    assert resolved("libero", mode="global") == "simulator" and resolved("libero", stop_on="simulator") == "simulator"
+    rec = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=3, planner="learned",
+                                  supervisor=SupervisorConfig(mode="glsr"))).run()
+    assert rec["stop_on"] == "simulator"  # the workcell: as before
+
+
+def test_a_verdict_the_local_plan_overrules_restarts_the_detector_stop_count():
+    @register_planner("always_done")
+    def _always(ctx):
+        planner = make_planner("learned", ctx)
+        planner.success_probability = lambda obs: 1.0
+        return planner
+
+    try:
+        cfg = dataclasses.replace(_cfg(stop_hold_steps=15), planner="always_done", stop_on="either",
+                                  supervisor=SupervisorConfig(mode="glsr", confirm_success="local_plan"))
+        rec = EpisodeRunner(cfg).run()
+    finally:
+        _FACTORIES.pop("always_done", None)
+    over = [e["step"] for e in rec["events"] if e.get("reason") == "detector_overruled"]
+    assert over, "the learned local plans of goal_cube_in_bowl still move at step 16"
+    checks = {e["step"]: e["hold"] for e in rec["events"] if e["kind"] == "stop_check"}
+    assert all(checks[s + 1] == 1 for s in over if s + 1 in checks)  # counted afresh after each overrule
+    assert rec["detector_overruled"] == len(over)

@@ -118,3 +118,74 @@ def test_glsr_hands_a_drawer_pull_over_to_local_plans(seed):
     assert rec["success"] and rec["fault"] is None
     assert rec["success_time_s"] < 10.0  # not hovering
     assert any(e.get("plan") == "local" for e in rec["events"] if e["kind"] == "supervisor")
+
+
+class StraightCamera:
+    """A camera whose 'unprojection' is the pixel (in cm) at the given depth: enough to measure a plan's reach."""
+
+    def unproject(self, uv, depth):
+        import numpy as np
+
+        return np.c_[np.asarray(uv, float) / 100.0, np.asarray(depth, float)]
+
+
+class SaysDonePlanner(FakePlanner):
+    """Detector: always done. Local prompt: a plan reaching ``reach_m`` (and switching the gripper if asked)."""
+
+    def __init__(self, reach_m, switch=False):
+        super().__init__(0.99)
+        self.reach_m, self.switch, self.local_calls = reach_m, switch, 0
+
+    def plan(self, obs, *, mode):
+        import numpy as np
+
+        from tcot_hybrid.plan import WaypointPlan
+
+        self.local_calls += 1
+        uv = np.zeros((9, 2))
+        uv[:, 0] = np.linspace(0, self.reach_m * 100, 9)
+        grip = np.zeros(9, bool)
+        grip[5:] = self.switch
+        return WaypointPlan(uv_px=uv, depth_m=np.ones(9), gripper_closed=grip, camera="c", kind=mode, step=0)
+
+
+class CameraExecutor(FakeExecutor):
+    camera = StraightCamera()
+
+
+def confirm_decisions(cfg, planner, steps, world_kind="libero"):
+    sup = Supervisor(cfg, planner, world_kind=world_kind)
+    return sup, [sup.decide(t, observe=lambda: None, executor=CameraExecutor()) for t in range(steps)]
+
+
+def test_a_success_verdict_the_local_plan_contradicts_is_overruled_and_that_plan_followed():
+    cfg = SupervisorConfig(mode="glsr", t_f=3, t_l=4, confirm_success="local_plan")
+    planner = SaysDonePlanner(reach_m=0.20)
+    sup, ds = confirm_decisions(cfg, planner, 13)
+    over = {t: d for t, d in enumerate(ds) if d.plan is not None}
+    assert sorted(over) == [4, 8, 12] and planner.local_calls == 3  # only at the local period, one call each
+    d = over[4]
+    assert d.plan_mode == "local" and d.plan.kind == "local" and d.event["reason"] == "detector_overruled"
+    assert d.event["plan_motion_m"] == pytest.approx(0.20) and sup.overruled == 3 and sup.replans == 3
+    assert ds[5].event["reason"] == "judged_successful" and ds[5].plan is None  # between periods: verdict stands
+    # a plan that stays put (within confirm_motion_m) confirms the verdict; a gripper switch overrules it
+    _, ds = confirm_decisions(cfg, SaysDonePlanner(reach_m=0.02), 13)
+    assert all(d.plan is None for d in ds) and ds[8].event["reason"] == "judged_successful"
+    _, ds = confirm_decisions(cfg, SaysDonePlanner(reach_m=0.02, switch=True), 13)
+    assert [t for t, d in enumerate(ds) if d.plan is not None] == [4, 8, 12]
+
+
+def test_confirm_success_auto_is_on_for_libero_only_and_off_is_algorithm1():
+    cfg = SupervisorConfig(mode="glsr", t_f=3, t_l=4)
+    assert cfg.confirm_success == "auto"
+    for world, expect in (("libero", [4, 8]), ("workcell", [])):
+        planner = SaysDonePlanner(reach_m=0.20)
+        _, ds = confirm_decisions(cfg, planner, 10, world_kind=world)
+        assert [t for t, d in enumerate(ds) if d.plan is not None] == expect
+    planner = SaysDonePlanner(reach_m=0.20)
+    _, ds = confirm_decisions(SupervisorConfig(mode="glsr", t_f=3, t_l=4, confirm_success="off"), planner, 10)
+    assert planner.local_calls == 0 and all(d.plan_mode is None for d in ds[1:])
+    with pytest.raises(ConfigError, match="confirm_success.*'sometimes'.*auto.*off.*local_plan"):
+        SupervisorConfig(confirm_success="sometimes")
+    with pytest.raises(ConfigError, match="confirm_motion_m"):
+        SupervisorConfig(confirm_motion_m=0.0)

@@ -54,21 +54,25 @@ def build_lines() -> list[str]:
                      f"step; {failed} unsuccessful (kept, never imitated), {crashed} crashed; {mib} MiB; "
                      f"{ntr} training / {nva} validation demos (split by seed).")
     runs = [("train", "examples/configs/train_libero.yaml")]
-    if tc.get("init"):
+    if str(tc.get("out", "")).endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
+        runs = [("train50", "examples/configs/train_libero50.yaml")]
+    elif tc.get("init"):
         runs.append(("train_finetune", "examples/configs/train_libero_finetune.yaml"))
     total = 0.0
     for i, (name, config) in enumerate(runs):
         log_p, met_p = HERE / f"{name}.log", HERE / f"{name}.metrics.jsonl"
-        tm = re.search(r"total time ([\d.]+) min", log_p.read_text()) if log_p.is_file() else None
+        parts = [float(x) for x in re.findall(r"total time ([\d.]+) min", log_p.read_text())] if log_p.is_file() else []
+        # a resumed run's log (tcot train --resume, appended) has one "total time" line per part
         epochs = [json.loads(x) for x in met_p.read_text().splitlines() if x.strip()] if met_p.is_file() else []
         cfg = yaml.safe_load((ROOT / config).read_text())
         best = min(epochs, key=lambda e: e["score"])["epoch"] if epochs else "?"
-        total += float(tm.group(1)) if tm else 0.0
+        total += sum(parts)
         lines.append(f"- **Training run {i + 1}** (`{config}`; `docs/libero-planner/{name}.log`, `{name}.metrics.jsonl`)"
                      + (f", from run {i}'s weights" if i else "")
                      + f": {len(epochs)} epochs (best {best}) of at most {cfg['max_epochs']}, peak lr {cfg['lr']}, cap "
-                     f"{cfg['max_minutes']} min" + (f", {float(tm.group(1)):.1f} min wall (loading, training, "
-                                                     f"validation, saving)" if tm else "") + ".")
+                     f"{cfg['max_minutes']} min" + (f", {sum(parts):.1f} min wall (loading, training, validation, "
+                                                     f"saving" + (f"; in {len(parts)} parts" if len(parts) > 1 else "")
+                                                     + ")" if parts else "") + ".")
     lines.append(f"- **Shipped checkpoint** (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`, {size_mb:.1f} MB): "
                  f"the last run's best epoch; {meta['train_demos']} training demos / {meta['train_frames']} frames; "
                  f"{total:.1f} min of training in all; heatmap read-out radius "
@@ -208,8 +212,26 @@ def latency_lines() -> list[str]:
             f"{ms('planner_inference_ms_1thread/detect')} |"]
 
 
+def confirm_lines() -> list[str]:
+    p = HERE / "confirm.json"
+    if not p.is_file():
+        return []
+    r = json.loads(p.read_text())
+    rows = [f"| {float(k) * 100:.0f} cm | {v['still_success']:.3f} | {v['still_other']:.3f} | "
+            f"{v['false_verdicts_overruled']} of {r['detector_false_verdicts']} | "
+            f"{v['true_verdicts_overruled']} of {r['detector_true_verdicts']} |" for k, v in r["by_reach"].items()]
+    return ["", f"**Local plans as a check on success verdicts** (`docs/libero-planner/confirm.py` → `confirm.json`; "
+            f"held-out frames, every 2nd: {r['frames']}, {r['success_frames']} of them success frames): a local plan "
+            f"reaches {r['reach_cm_median_success']} cm (median) on success frames and {r['reach_cm_median_other']} cm "
+            f"on the others (AUROC of the reach as a success score {r['reach_auroc']}; the detector's "
+            f"{r['detector_auroc']}). A plan reaching no farther than the bound and switching no gripper is *still*; "
+            f"`supervisor.confirm_motion_m` is 5 cm:", "",
+            "| bound | still on success frames | still on the others | false verdicts (p >= 0.5) overruled | "
+            "true verdicts overruled |", "|---|---|---|---|---|", *rows]
+
+
 def main() -> None:
-    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines()) + "\n"
+    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines() + confirm_lines()) + "\n"
     (HERE / "summary.md").write_text(text)
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-planner", text)

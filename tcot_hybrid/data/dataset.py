@@ -402,6 +402,14 @@ class DemoFile:
                            K=K, T_world_cam=T,
                            near_m=float(env.get("near_m", 0.01)), far_m=float(env.get("far_m", 50.0)))
 
+    def support_z(self, name: str) -> float | None:
+        """World height of the surface demo ``name``'s objects rest on [m] (the table top), recorded per demo in a
+        file with a camera per demo (LIBERO); None for a file with one camera (the workcell: table top z = 0)."""
+        if not self.camera_per_demo:
+            return None
+        self.info(name)
+        return self._demo_camera_arrays(name, f"/data/{name}")[2]
+
 
 def open_demos(path: str | Path) -> DemoFile:
     """Open and validate a demonstration file (read-only). Raises DatasetError naming the file."""

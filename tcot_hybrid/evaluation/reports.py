@@ -86,7 +86,7 @@ def ik_table(cells: list[dict]) -> list[str]:
 def markdown(result: dict, *, with_cells: bool = True) -> str:
     """The evaluation as Markdown: every cell (optional), Table 1 and Table 4 forms, detector metrics."""
     cells = result["cells"]
-    detector_stopped = any(c.get("stop_on") == "detector" for c in cells)
+    detector_stopped = any(c.get("stop_on") in ("detector", "either") for c in cells)
     lines = [] if not with_cells else ["## Cells", "",
              "| task | planner | mode | perturb | robot | controller | ik | sweep | success [95 % CI] n | fired | "
              "premature stops | mean time [s] | replans | max limit viol. [rad] | max \\|q̇\\|/v_max |",
@@ -101,8 +101,9 @@ def markdown(result: dict, *, with_cells: bool = True) -> str:
     lines += ["", f"Over all {n_ep} episodes: max joint-limit violation "
               f"{max(c['max_joint_limit_violation_rad'] for c in cells):.2e} rad, max |q̇|/v_max "
               f"{max(c['max_velocity_ratio'] for c in cells):.3f}, sim faults {sum(c['faults'] for c in cells)}."
-              + (f" Episodes ended by the failure detector (`--stop-on detector`); premature stops (stopped, "
-                 f"predicate false): {sum(c.get('premature_stops', 0) for c in cells)} of {n_ep}."
+              + (f" Episodes ended by the failure detector (`--stop-on "
+                 f"{'/'.join(sorted({c.get('stop_on') for c in cells} & {'detector', 'either'}))}`); premature stops "
+                 f"(stopped, predicate false): {sum(c.get('premature_stops', 0) for c in cells)} of {n_ep}."
                  if detector_stopped else "")]
     # Table 1: per suite success for each configuration row.
     suites = sorted({c["suite"] for c in cells})

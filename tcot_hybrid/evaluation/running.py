@@ -32,7 +32,7 @@ def run_job(job: Job) -> dict:
     try:
         runner = EpisodeRunner(c)
         # post-success probes of the detector (false alarms) only where the simulator ended the episode
-        probe = c.supervisor.mode.startswith("glsr") and c.stop_on == "simulator"
+        probe = c.supervisor.mode.startswith("glsr") and runner.stop_on in ("simulator", "either")
         rec = runner.run(steps_after_success=DETECTOR_STEPS_AFTER_SUCCESS if probe else 0, probe_detector=probe)
         rec.pop("config", None)  # every event `tcot run` records is kept: a failure is diagnosed without a re-run
     except Exception as exc:  # noqa: BLE001 - recorded, counted as failure

@@ -96,6 +96,8 @@ class FrameSet:
     tasks: list[str]
     instructions: list[str]
     cameras: list  # CameraModel per camera index
+    camera_support_z: list = dataclasses.field(default_factory=list)  # per camera index: the lowest support surface
+    # its demos recorded [m, world] (the table top; None: not recorded, e.g. a workcell file)
 
     def __len__(self) -> int:
         return int(self.images.shape[0])
@@ -173,13 +175,18 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
                                              "dg", "demo", "t", "traj", "cam", "zref")}
     tasks, instrs = [], []
     cameras: list = []
+    supports: list = []
     cam_keys: dict[bytes, int] = {}
     for di, name in enumerate(names):
         camera = f.camera_model(name)
         key = np.r_[np.ravel(camera.K), np.ravel(camera.T_world_cam)].tobytes()
+        support = f.support_z(name)
         if key not in cam_keys:
             cam_keys[key] = len(cameras)
             cameras.append(camera)
+            supports.append(support)
+        elif support is not None and supports[cam_keys[key]] is not None:  # one camera over several tables: lowest
+            supports[cam_keys[key]] = min(supports[cam_keys[key]], support)
         zref = height_reference(camera, height_ref)
         info = f.info(name)
         arr = f.read(name, _KEYS)
@@ -225,7 +232,8 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         success=cat("succ"), traj=np.concatenate(cols["traj"]), online=np.full(sum(map(len, cols["t"])), online),
         d_delta=cat("dd"), d_grip=cat("dg"),
         demo=np.concatenate(cols["demo"]), t=np.concatenate(cols["t"]), cam=np.concatenate(cols["cam"]),
-        z_ref=np.concatenate(cols["zref"]), demos=names, tasks=tasks, instructions=instrs, cameras=cameras)
+        z_ref=np.concatenate(cols["zref"]), demos=names, tasks=tasks, instructions=instrs, cameras=cameras,
+        camera_support_z=supports)
 
 
 def concat_frames(sets: list[FrameSet]) -> FrameSet:

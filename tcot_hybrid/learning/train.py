@@ -10,6 +10,13 @@ training stops early when it has not improved for ``patience`` epochs.
 
 Every epoch appends one JSON line to ``<out>.metrics.jsonl``: losses, val pixel error median/p90, val
 3D error median/p90, gripper accuracy and success AUROC.
+
+Resuming: every epoch also writes ``<out>.resume.pt`` (weights, AdamW and one-cycle scheduler state, the sampling and
+torch random states, the best epoch so far and its weights, the config and the data's hash). ``train(cfg,
+resume=True)`` (``tcot train --resume``) continues after the last saved epoch: a run cut by ``max_minutes`` (or
+killed) goes on where it stopped, and with a fixed ``threads`` it ends with the same weights as one uninterrupted run.
+A finished run (all epochs, or early stop) is not trained again. A different config (but for ``max_minutes`` and
+``threads``) or data file is refused, naming what differs.
 """
 from __future__ import annotations
 
@@ -37,8 +44,73 @@ class TrainResult:
     wall_s: float
 
 
-def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
-    """Train per ``cfg``; writes the best-on-validation checkpoint to ``cfg.out``; returns its metrics."""
+RESUME_FREE_FIELDS = ("max_minutes", "threads")  # config fields a resumed run may change
+
+
+def resume_path(out: str | Path) -> Path:
+    """Where a run writing checkpoint ``out`` keeps its per-epoch training state (``--resume``)."""
+    return Path(out).with_suffix(".resume.pt")
+
+
+def load_resume_state(cfg: TrainConfig, data_hash: str) -> dict | None:
+    """The saved state of the run writing ``cfg.out`` (None when there is none), after checking that it was written
+    with the same config (``RESUME_FREE_FIELDS`` aside) and data; ConfigError naming the difference otherwise."""
+    import torch
+
+    path = resume_path(cfg.out)
+    if not path.is_file():
+        return None
+    try:
+        st = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - a truncated or foreign file: say which and what to do
+        why = str(exc).strip().splitlines()[-1][:160] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(f"--resume: cannot read the training state {str(path)!r} ({why}); delete it to start "
+                          f"afresh") from exc
+    if not isinstance(st, dict) or st.get("format") != RESUME_FORMAT:
+        raise ConfigError(f"--resume: {str(path)!r} is not a training state of this version (format "
+                          f"{st.get('format') if isinstance(st, dict) else type(st).__name__!r}, expected "
+                          f"{RESUME_FORMAT!r}); delete it to start afresh")
+    saved, now = json.loads(st["config"]), _jsonable(cfg)
+    diff = sorted(k for k in set(saved) | set(now) if k not in RESUME_FREE_FIELDS and saved.get(k) != now.get(k))
+    if diff:
+        k = diff[0]
+        raise ConfigError(f"--resume: {str(path)!r} was written by a run with {k} = {saved.get(k)!r}, this run has "
+                          f"{k} = {now.get(k)!r} ({len(diff)} field(s) differ: {', '.join(diff)}); only "
+                          f"{', '.join(RESUME_FREE_FIELDS)} may change between the parts of one run. Resume with the "
+                          f"same config, or start afresh (--overwrite, without --resume)")
+    if st["data_hash"] != data_hash:
+        raise ConfigError(f"--resume: {str(path)!r} was trained on data with hash {st['data_hash']}, "
+                          f"{cfg.data!r} now has {data_hash} (the file changed, e.g. more demonstrations were "
+                          f"collected); start afresh (--overwrite, without --resume)")
+    return st
+
+
+RESUME_FORMAT = "tcot-train-resume-1"
+
+
+def run_finished(out: str | Path) -> bool:
+    """Whether the run writing checkpoint ``out`` has finished (all its epochs, or an early stop) by its saved
+    training state; False while a part cut by ``max_minutes`` is left to resume (or no state was saved)."""
+    import torch
+
+    path = resume_path(out)
+    return path.is_file() and bool(torch.load(path, map_location="cpu", weights_only=True).get("finished"))
+
+
+def _save_resume_state(cfg: TrainConfig, **state) -> None:
+    import os
+
+    import torch
+
+    path = resume_path(cfg.out)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save({"format": RESUME_FORMAT, "config": json.dumps(_jsonable(cfg)), **state}, tmp)
+    os.replace(tmp, path)  # never a half-written state
+
+
+def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = False) -> TrainResult:
+    """Train per ``cfg``; writes the best-on-validation checkpoint to ``cfg.out``; returns its metrics.
+    ``resume``: continue the run's saved state (``resume_path``) when there is one (see the module doc)."""
     import torch
     from tqdm import tqdm
 
@@ -84,8 +156,14 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         vas.append(on_va)
     tr, va = concat_frames(trs), concat_frames(vas)
     del trs, vas
+    data_hash = "+".join(file_hash(p) for p in data_files)
+    state = load_resume_state(cfg, data_hash) if resume else None
+    if resume and state is None:
+        log(f"--resume: no training state at {resume_path(cfg.out)}; starting afresh")
     model = PlannerNet(mcfg)
-    if cfg.init is not None:
+    if state is not None:
+        pass  # the weights come from the saved state below
+    elif cfg.init is not None:
         _load_init(model, cfg.init, vocab, log)
     else:
         model.proprio_mean.copy_(tr.proprio.mean(0))
@@ -101,11 +179,28 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
     out = Path(cfg.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     log_path = out.with_suffix(".metrics.jsonl")
-    log_path.write_text("")
     best_score, best_state, best_metrics, best_epoch, bad_epochs = math.inf, None, {}, -1, 0
-    data_hash = "+".join(file_hash(p) for p in data_files)
-    epoch = 0
-    for epoch in range(1, cfg.max_epochs + 1):
+    start_epoch, elapsed_before, finished = 1, 0.0, False
+    if state is not None:
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        sched.load_state_dict(state["scheduler"])
+        rng.bit_generator.state = json.loads(state["numpy_rng"])
+        torch.set_rng_state(state["torch_rng"])
+        best_score, best_state = float(state["best_score"]), state["best_state"]
+        best_metrics, best_epoch = json.loads(state["best_metrics"]), int(state["best_epoch"])
+        bad_epochs, elapsed_before = int(state["bad_epochs"]), float(state["elapsed_s"])
+        start_epoch, finished = int(state["epoch"]) + 1, bool(state["finished"])
+        kept = [line for line in (log_path.read_text().splitlines() if log_path.is_file() else [])
+                if line.strip() and json.loads(line)["epoch"] < start_epoch]  # an epoch logged after the last save
+        log_path.write_text("".join(line + "\n" for line in kept))
+        log(f"resumed from {resume_path(out)} after epoch {start_epoch - 1} of {cfg.max_epochs} (best epoch "
+            f"{best_epoch}; {elapsed_before / 60:.1f} min of earlier parts)"
+            + ("; that run had finished: nothing left to train" if finished else ""))
+    else:
+        log_path.write_text("")
+    epoch = start_epoch - 1
+    for epoch in range(start_epoch, cfg.max_epochs + 1 if not finished else start_epoch):
         model.train()
         mix = cfg.mix_stage1 if epoch <= cfg.stage1_epochs else cfg.mix_stage2
         if mcfg.kind == "direct":  # one objective: every frame equally likely
@@ -153,7 +248,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         rec = {"epoch": epoch, "stage": 1 if epoch <= cfg.stage1_epochs or mcfg.kind == "direct" else 2,
                "train": {k: round(v / steps_per_epoch, 5) for k, v in sums.items()},
                "val": m, "score": round(score, 4), "lr": sched.get_last_lr()[0],
-               "epoch_train_s": round(train_s, 1), "elapsed_s": round(time.perf_counter() - t_start, 1),
+               "epoch_train_s": round(train_s, 1),
+               "elapsed_s": round(elapsed_before + time.perf_counter() - t_start, 1),
                "threads": torch.get_num_threads()}
         with open(log_path, "a") as fh:
             fh.write(json.dumps(rec) + "\n")
@@ -163,11 +259,18 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         else:
             bad_epochs += 1
+        finished = bad_epochs >= cfg.patience or epoch == cfg.max_epochs
+        _save_resume_state(cfg, model=model.state_dict(), optimizer=opt.state_dict(), scheduler=sched.state_dict(),
+                           numpy_rng=json.dumps(rng.bit_generator.state), torch_rng=torch.get_rng_state(),
+                           best_score=best_score, best_state=best_state, best_metrics=json.dumps(best_metrics),
+                           best_epoch=best_epoch, bad_epochs=bad_epochs, epoch=epoch, finished=finished,
+                           elapsed_s=elapsed_before + time.perf_counter() - t_start, data_hash=data_hash)
         if bad_epochs >= cfg.patience:
             log(f"early stop: no better validation score for {cfg.patience} epochs (best epoch {best_epoch})")
             break
-        if (time.perf_counter() - t_start) / 60 >= cfg.max_minutes:
-            log(f"time cap: {cfg.max_minutes} min reached after epoch {epoch} (best epoch {best_epoch})")
+        if (time.perf_counter() - t_start) / 60 >= cfg.max_minutes and epoch < cfg.max_epochs:
+            log(f"time cap: {cfg.max_minutes} min reached after epoch {epoch} (best epoch {best_epoch}); "
+                f"`tcot train --resume` (same config) continues from epoch {epoch + 1}")
             break
     model.load_state_dict(best_state)
     if cfg.trainable == "detect":
@@ -194,20 +297,26 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print) -> TrainResult:
         meta["lowest_tcp_by_camera"] = lowest_tcp_by_camera(tr)
     save_checkpoint(out, model, meta)
     wall = time.perf_counter() - t_start
-    log(f"wrote {out} (best epoch {best_epoch}) in {wall / 60:.1f} min")
+    log(f"wrote {out} (best epoch {best_epoch}) in {wall / 60:.1f} min"
+        + (f" ({(elapsed_before + wall) / 60:.1f} min with the earlier parts)" if elapsed_before else ""))
     return TrainResult(checkpoint=out, metrics=best_metrics, epochs=epoch, wall_s=wall)
 
 
 def lowest_tcp_by_camera(frames) -> list[dict]:
     """Per planner camera of ``frames`` (its position), the lowest labelled TCP height of its imitated frames (global
-    and local labels, measured like the network's heights): where ``learned.min_height_m`` is counted from on a
-    ``height_ref: camera`` checkpoint (:func:`tcot_hybrid.planners.learned.lowest_plan_height`)."""
+    and local labels, measured like the network's heights) and, where the demonstrations recorded it, the support
+    surface under that camera (``support_z_m``, from the camera like the heights): where ``learned.min_height_m`` is
+    counted from on a ``height_ref: camera`` checkpoint (:func:`tcot_hybrid.planners.learned.lowest_plan_height`)."""
     out = []
+    supports = getattr(frames, "camera_support_z", None) or [None] * len(frames.cameras)
     for c in np.unique(frames.cam[frames.traj]):
         sel = np.flatnonzero(frames.traj & (frames.cam == c))
         low = min(float(frames.g_z.numpy()[sel].min()), float(frames.l_z.numpy()[sel].min()))
         pos = np.asarray(frames.cameras[c].T_world_cam, dtype=float)[:3, 3]
-        out.append({"camera_pos_m": [round(float(x), 4) for x in pos], "lowest_z_m": round(low, 4)})
+        entry = {"camera_pos_m": [round(float(x), 4) for x in pos], "lowest_z_m": round(low, 4)}
+        if supports[c] is not None:
+            entry["support_z_m"] = round(float(supports[c]) - float(pos[2]), 4)
+        out.append(entry)
     return out
 
 

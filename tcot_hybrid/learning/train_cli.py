@@ -37,6 +37,10 @@ class TrainCommand:
     """Collection worker processes (only with --collect)."""
     overwrite: bool = False
     """Replace an existing checkpoint at --out (refused without this flag)."""
+    resume: bool = False
+    """Continue the run writing --out from its last finished epoch (``<out>.resume.pt``, written every epoch), e.g.
+    after ``max_minutes`` cut it or it was killed; same config (``max_minutes`` and ``threads`` may change). Without a
+    saved state the run starts afresh."""
 
 
 def check_train_out(out: str | Path, *, overwrite: bool) -> None:
@@ -60,7 +64,10 @@ def cmd_train(argv: list[str]) -> int:
     base = load_train_config(known.config) if known.config else TrainConfig()
     cmd = tyro.cli(TrainCommand, args=argv, default=TrainCommand(cfg=base, config=known.config), prog="tcot train")
     t0 = time.perf_counter()
-    check_train_out(cmd.cfg.out, overwrite=cmd.overwrite)
+    from tcot_hybrid.learning.train import resume_path
+
+    resuming = cmd.resume and resume_path(cmd.cfg.out).is_file()
+    check_train_out(cmd.cfg.out, overwrite=cmd.overwrite or resuming)
     data = Path(cmd.cfg.data)
     if cmd.collect and data.exists():
         from tcot_hybrid.learning.data import env_of
@@ -81,6 +88,6 @@ def cmd_train(argv: list[str]) -> int:
         raise ConfigError(f"demonstration file {str(data)!r} does not exist; run `tcot collect --out {data}` "
                           f"or add --collect")
     os.environ.setdefault("OMP_NUM_THREADS", str(cmd.cfg.threads))
-    res = train(cmd.cfg)
+    res = train(cmd.cfg, resume=cmd.resume)
     print(f"total time {(time.perf_counter() - t0) / 60:.1f} min -> {res.checkpoint}")
     return 0

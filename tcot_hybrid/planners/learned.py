@@ -231,20 +231,28 @@ CAMERA_MATCH_M = 0.10  # a run camera this close to a training camera [m] is tha
 def lowest_plan_height(meta: dict, camera: CameraModel, min_height_m: float) -> tuple[float, str]:
     """(world z below which a planned TCP height is refused, where that bound comes from) for a checkpoint's
     ``meta`` and the run's planner ``camera``. ``height_ref: world``: ``min_height_m`` itself (table top at z = 0).
-    ``height_ref: camera``: the checkpoint's ``lowest_tcp_by_camera`` (per training camera, the lowest TCP height its
-    demonstrations reached, measured like the network's heights from the camera) of the training camera within
-    CAMERA_MATCH_M of the run's (the lowest of all of them when none is), plus the camera's height and
-    ``min_height_m``. A camera-referenced checkpoint that records none (written before it existed) keeps the world
-    bound."""
+    ``height_ref: camera``: from the checkpoint's ``lowest_tcp_by_camera`` entry of the training camera within
+    CAMERA_MATCH_M of the run's (the lowest of all of them when none is): the support surface its demonstrations
+    recorded (``support_z_m``, from the camera: the table top, as on the workcell), or in checkpoints written before
+    that was recorded the lowest TCP height they reached (``lowest_z_m``: grasps 1-3 cm above the table, so the bound
+    sat up to 1 cm *above* the table and refused plans a centimetre low: docs/libero-planner.md, "Failure analysis");
+    plus the camera's height and ``min_height_m``. A camera-referenced checkpoint that records neither keeps the
+    world bound."""
     entries = meta.get("lowest_tcp_by_camera")
     if meta.get("height_ref", "world") != "camera" or not entries:
         return float(min_height_m), "learned.min_height_m; table top at 0"
     pos = np.asarray(camera.T_world_cam, dtype=float)[:3, 3]
     dist = np.array([np.linalg.norm(np.asarray(e["camera_pos_m"], float) - pos) for e in entries])
     near = dist <= CAMERA_MATCH_M
-    low = float(min(e["lowest_z_m"] for e, n in zip(entries, near) if n or not near.any()))
-    z = float(pos[2]) + low + float(min_height_m)
+    chosen = [e for e, n in zip(entries, near) if n or not near.any()]
     which = "under this camera" if near.any() else "under any training camera (none within 10 cm of this one)"
+    if all("support_z_m" in e for e in chosen):  # the support surface the demonstrations recorded: the table top
+        low = float(min(e["support_z_m"] for e in chosen))
+        return float(pos[2]) + low + float(min_height_m), (
+            f"learned.min_height_m {min_height_m} m from the support surface the training demonstrations recorded "
+            f"{which}, {low:+.4f} m from the camera")
+    low = float(min(e["lowest_z_m"] for e in chosen))
+    z = float(pos[2]) + low + float(min_height_m)
     return z, (f"learned.min_height_m {min_height_m} m from the lowest TCP height the training demonstrations "
                f"reached {which}, {low:+.4f} m from the camera")
 

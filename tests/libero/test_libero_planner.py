@@ -62,6 +62,9 @@ def test_checkpoint_records_world_robot_and_is_refused_in_the_workcell(tiny_chec
     (entry,) = meta["lowest_tcp_by_camera"]  # one scene: one camera
     np.testing.assert_allclose(entry["camera_pos_m"], cam.T_world_cam[:3, 3], atol=1e-4)
     assert low - 1e-4 <= entry["lowest_z_m"] + cam.T_world_cam[2, 3] <= low + 0.02
+    with open_demos(data) as f:  # and the table top those demos recorded: the floor counts from it
+        support = min(f.support_z(n) for n in f.mask("train"))
+    assert entry["support_z_m"] + cam.T_world_cam[2, 3] == pytest.approx(support, abs=1e-4) and support < low
     with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
         load_checkpoint(res.checkpoint, world="workcell")
     with pytest.raises(CheckpointError, match="'libero' world.*'workcell' world"):
