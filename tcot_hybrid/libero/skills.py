@@ -518,6 +518,7 @@ class PickPlace(LiberoSkill):
         rel_origin = g_rot.T @ (obj_pos - g_pos)
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         start = world.tcp_pos() if held else g_pos
+        centre_xy = self._centre_xy(world, effects)
         ranked = []
         for place_xy, yaw, spot in self._place_candidates(world, effects, obj_boxes, obj_pos):
             R_place = rot_z(yaw) @ g_rot
@@ -550,10 +551,10 @@ class PickPlace(LiberoSkill):
             hidden = not (ctx.in_view(release_pt) and ctx.in_view(release_pt + np.array([0, 0, 0.03]))
                           and ctx.in_view(over))
             key = (hidden, z - z_min > PLACE_MAX_DROP_M, self._tight(carried(release_pt), near),
-                   round(z - z_min, 2), float(np.linalg.norm(spot - self._centre_xy(world, effects))))
-            ranked.append((key, len(ranked), dict(release=release_pt, release_rot=R_place, carry_z=carry_z,
-                                                   carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2]))))
-        ranked = [(key, plan) for key, _, plan in sorted(ranked, key=lambda r: r[:2])]
+                   round(z - z_min, 2), float(np.linalg.norm(spot - centre_xy)))
+            ranked.append((key, dict(release=release_pt, release_rot=R_place, carry_z=carry_z,
+                                     carry_floor=top + 0.01 - lo[2], obj_below_tcp=float(-lo[2]))))
+        ranked.sort(key=lambda r: r[0])  # stable: equal keys keep the candidates' order
         cavity = self._cavity(effects, obstacles)
         if cavity is not None:
             # lowered from above, the object stops on the cavity's ceiling (a mug on top of the microwave):
