@@ -19,6 +19,21 @@ def _cfg(**kw):
                      supervisor=SupervisorConfig(mode="glsr"), **kw)
 
 
+def _run_always_done(**fields) -> dict:
+    """One episode of ``_cfg()`` with ``fields`` replaced, planned by the learned planner whose detector
+    always says the task is done."""
+    @register_planner("always_done")
+    def _always(ctx):
+        planner = make_planner("learned", ctx)
+        planner.success_probability = lambda obs: 1.0
+        return planner
+
+    try:
+        return EpisodeRunner(dataclasses.replace(_cfg(), planner="always_done", **fields)).run()
+    finally:
+        _FACTORIES.pop("always_done", None)
+
+
 def test_detector_stopped_episode_is_judged_by_the_predicate_afterwards():
     rec = EpisodeRunner(_cfg()).run()
     checks = [e for e in rec["events"] if e["kind"] == "stop_check"]
@@ -33,17 +48,7 @@ def test_detector_stopped_episode_is_judged_by_the_predicate_afterwards():
 
 
 def test_a_detector_that_always_says_done_stops_prematurely():
-    @register_planner("always_done")
-    def _always(ctx):
-        planner = make_planner("learned", ctx)
-        planner.success_probability = lambda obs: 1.0
-        return planner
-
-    try:
-        cfg = dataclasses.replace(_cfg(stop_hold_steps=2), planner="always_done")
-        rec = EpisodeRunner(cfg).run()
-    finally:
-        _FACTORIES.pop("always_done", None)
+    rec = _run_always_done(stop_hold_steps=2)
     checks = [e for e in rec["events"] if e["kind"] == "stop_check"]
     assert rec["stopped_by"] == "detector" and len(checks) == 2 and checks[-1]["step"] == 17
     assert not rec["success"] and rec["premature_stop"]  # nothing was delivered by step 17
@@ -69,16 +74,7 @@ def test_either_ends_at_the_predicate_or_at_the_detector_whichever_comes_first()
     assert rec["stop_on"] == "either" and rec["success"] and rec["stopped_by"] == "simulator"
     assert not rec["premature_stop"]
 
-    @register_planner("always_done")
-    def _always(ctx):
-        planner = make_planner("learned", ctx)
-        planner.success_probability = lambda obs: 1.0
-        return planner
-
-    try:
-        rec = EpisodeRunner(dataclasses.replace(_cfg(stop_hold_steps=2), planner="always_done", stop_on="either")).run()
-    finally:
-        _FACTORIES.pop("always_done", None)
+    rec = _run_always_done(stop_hold_steps=2, stop_on="either")
     assert rec["stopped_by"] == "detector" and rec["steps"] == 17  # checks at 16, 17: not idling to the time limit
     assert not rec["success"] and rec["premature_stop"]
 
@@ -108,18 +104,8 @@ def test_auto_is_either_for_glsr_with_a_detector_on_libero_and_simulator_elsewhe
 
 
 def test_a_verdict_the_local_plan_overrules_restarts_the_detector_stop_count():
-    @register_planner("always_done")
-    def _always(ctx):
-        planner = make_planner("learned", ctx)
-        planner.success_probability = lambda obs: 1.0
-        return planner
-
-    try:
-        cfg = dataclasses.replace(_cfg(stop_hold_steps=15), planner="always_done", stop_on="either",
-                                  supervisor=SupervisorConfig(mode="glsr", confirm_success="local_plan"))
-        rec = EpisodeRunner(cfg).run()
-    finally:
-        _FACTORIES.pop("always_done", None)
+    rec = _run_always_done(stop_hold_steps=15, stop_on="either",
+                           supervisor=SupervisorConfig(mode="glsr", confirm_success="local_plan"))
     over = [e["step"] for e in rec["events"] if e.get("reason") == "detector_overruled"]
     assert over, "the learned local plans of goal_cube_in_bowl still move at step 16"
     checks = {e["step"]: e["hold"] for e in rec["events"] if e["kind"] == "stop_check"}
