@@ -860,10 +860,12 @@ class PickPlace(LiberoSkill):
             start = p["slide"]
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
-        # the lift only has to clear what is near the start (the carry then climbs towards the destination)
+        # the lift only has to clear what is near the start (the carry then climbs towards the destination); a
+        # replan with the object already in the hand lifts no higher than that clearance or where the hand is
+        # (a fixed rise above the hand ratcheted it up by that much at every local replan, out of the camera's view)
         lift = p["lift"] if not p["held"] else ctx.into_view(
             [start[0], start[1], carry_z],
-            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2] + 0.03))
+            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2]))
         way_in = p.get("way_in")  # into a cavity: down in front of its opening, then straight in
         above = release if way_in is None else way_in
         over = ctx.into_view([above[0], above[1], carry_z], max(floor, above[2] + 0.03))
