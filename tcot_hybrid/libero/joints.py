@@ -57,7 +57,7 @@ class MoveJoint(LiberoSkill):
         """Pinch the handle bar horizontally (fingers above and below it), then move along the axis."""
         # the handle: the box that sticks out furthest towards the pull direction (-axis when opening is -q)
         pull = -axis  # direction the part moves as q decreases
-        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        ext = moving.world_extents()
         front = (moving.centre @ pull) + np.abs(ext @ np.abs(pull))
         i = int(np.argmax(front))
         handle_c = moving.centre[i].copy()
@@ -134,7 +134,7 @@ class MoveJoint(LiberoSkill):
         """Turn a knob by pushing the end of its top bar along its arc with the closed fingers (no wrist
         turn: a knob sits close to the robot's base, where turning the hand about it runs joint 7 into
         its torque limit)."""
-        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        ext = moving.world_extents()
         tops = moving.centre[:, 2] + ext[:, 2]
         bar = tops >= tops.max() - 0.02
         r = np.linalg.norm(moving.centre[:, :2] - anchor[:2], axis=1)
