@@ -95,8 +95,9 @@ def build_lines() -> list[str]:
 
 def heldout_lines() -> list[str]:
     """The read-out comparison and the per-suite breakdown (docs/libero-planner/heldout.py)."""
-    rows = [(label, json.loads(p.read_text())) for label, p in (("first run", HERE / "heldout-first.json"),
-                                                                 ("shipped", HERE / "heldout.json")) if p.is_file()]
+    rows = [(label, json.loads(p.read_text())) for label, p in (
+        ("400 demos, first run", HERE / "heldout-first.json"), ("400 demos, shipped before", HERE / "heldout-400.json"),
+        ("shipped", HERE / "heldout.json")) if p.is_file()]
     if not rows:
         return []
     lines = ["", "By heatmap read-out (`docs/libero-planner/heldout.py` → `heldout-first.json`, `heldout.json`; median "
@@ -123,6 +124,17 @@ def heldout_lines() -> list[str]:
             w5 = "-" if x["t0_first_grasp_within_5px"] is None else f"{x['t0_first_grasp_within_5px']:.2f}"
             lines.append(f"| {s} | {x['plans_t0']} | {x['global_px_median']:.2f} | {x['global_t0_px_median']:.2f} | "
                          f"{fg} | {w5} |")
+    rw = r.get("reworded")
+    if rw:
+        lines += ["", f"**Reworded instructions** ({label}; `heldout.py`: each of the {rw['instructions']} instructions "
+                  f"replaced by one rewording, `tcot_hybrid.learning.evaluate.PARAPHRASES`, verbs, prepositions and "
+                  f"word order changed, objects' names kept; median {rw['unknown_word_fraction_median']:.0%} of a "
+                  f"rewording's words unknown to the checkpoint; {len(rw['refused'])} rewordings the planner would "
+                  f"refuse): on the {rw['t0_plans']} held-out t = 0 plans, median pixel error "
+                  f"{rw['original']['t0_px_median']:.2f} → {rw['reworded']['t0_px_median']:.2f} px, first grasp "
+                  f"{rw['original']['t0_first_grasp_px_median']:.2f} → {rw['reworded']['t0_first_grasp_px_median']:.2f} "
+                  f"px, first grasp within 5 px {rw['original']['t0_first_grasp_within_5px']:.2f} → "
+                  f"{rw['reworded']['t0_first_grasp_within_5px']:.2f}."]
     return lines
 
 
