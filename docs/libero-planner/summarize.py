@@ -7,8 +7,9 @@
     make libero-planner-eval   # tcot eval, shipped init states: docs/libero-planner/eval-shipped/
     .venv/bin/python docs/libero-planner/summarize.py
 
-docs/libero-planner/eval-shipped-first/ is the same evaluation of the first checkpoint (the first training run alone,
-read out around the heatmap's peak), kept beside it.
+docs/libero-planner/eval-shipped-first/ and eval-shipped-400/ are the same evaluation of the 400-demonstration
+checkpoints (eval-shipped-400: the one shipped before the 2000-demonstration run; eval-shipped-first: its first
+training run alone, read out around the heatmap's peak), kept beside it.
 """
 from __future__ import annotations
 
@@ -138,7 +139,8 @@ def heldout_lines() -> list[str]:
     return lines
 
 
-EVALS = (("first checkpoint", "eval-shipped-first"), ("shipped checkpoint", "eval-shipped"))
+EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shipped-400"),
+         ("shipped checkpoint", "eval-shipped"))
 
 
 def _episodes(name: str) -> list[dict]:
