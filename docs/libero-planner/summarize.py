@@ -62,18 +62,22 @@ def build_lines() -> list[str]:
     total = 0.0
     for i, (name, config) in enumerate(runs):
         log_p, met_p = HERE / f"{name}.log", HERE / f"{name}.metrics.jsonl"
-        parts = [float(x) for x in re.findall(r"total time ([\d.]+) min", log_p.read_text())] if log_p.is_file() else []
-        # a resumed run's log (tcot train --resume, appended) has one "total time" line per part
+        text = log_p.read_text() if log_p.is_file() else ""
         epochs = [json.loads(x) for x in met_p.read_text().splitlines() if x.strip()] if met_p.is_file() else []
+        # a resumed run's log (tcot train --resume, appended) starts one part per invocation; its metrics' elapsed_s
+        # counts every saved epoch of every part (a part cut by a session's end loses only its unfinished epoch)
+        n_parts = max(1, len(re.findall(r"^(?:--resume: no training state|resumed from )", text, re.M)))
+        wall = (epochs[-1]["elapsed_s"] / 60 if epochs and "elapsed_s" in epochs[-1]
+                else sum(float(x) for x in re.findall(r"total time ([\d.]+) min", text)))
         cfg = yaml.safe_load((ROOT / config).read_text())
         best = min(epochs, key=lambda e: e["score"])["epoch"] if epochs else "?"
-        total += sum(parts)
+        total += wall
         lines.append(f"- **Training run {i + 1}** (`{config}`; `docs/libero-planner/{name}.log`, `{name}.metrics.jsonl`)"
                      + (f", from run {i}'s weights" if i else "")
                      + f": {len(epochs)} epochs (best {best}) of at most {cfg['max_epochs']}, peak lr {cfg['lr']}, cap "
-                     f"{cfg['max_minutes']} min" + (f", {sum(parts):.1f} min wall (loading, training, validation, "
-                                                     f"saving" + (f"; in {len(parts)} parts" if len(parts) > 1 else "")
-                                                     + ")" if parts else "") + ".")
+                     f"{cfg['max_minutes']} min" + (f", {wall:.1f} min (loading, training, validation, saving"
+                                                     + (f"; in {n_parts} parts joined by --resume" if n_parts > 1 else "")
+                                                     + ")" if wall else "") + ".")
     lines.append(f"- **Shipped checkpoint** (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`, {size_mb:.1f} MB): "
                  f"the last run's best epoch; {meta['train_demos']} training demos / {meta['train_frames']} frames; "
                  f"{total:.1f} min of training in all; heatmap read-out radius "
