@@ -199,6 +199,19 @@ def eval_lines() -> list[str]:
         n = sum(oracle[s][1] for s in SUITES)
         lines.append("| oracle (privileged) | " + " | ".join(rate(*oracle[s]) for s in SUITES) + f" | {rate(k, n)} |")
     lines.append("")
+    label, _, eps = runs[-1]
+    by = {(e["mode"], e["task"], e["seed"]): e for e in eps}
+    pairs_g = [(by[("global", t, s)], e) for (m, t, s), e in by.items() if m == "glsr" and ("global", t, s) in by]
+    if pairs_g:
+        both = sum(g["success"] and e["success"] for g, e in pairs_g)
+        lost = [e for g, e in pairs_g if g["success"] and not e["success"]]
+        won = sum(e["success"] and not g["success"] for g, e in pairs_g)
+        stops = sum(e["stopped_by"] == "detector" and not e["success"] for _, e in pairs_g)
+        lines.append(f"- {label}, GLSR against global-only on the same {len(pairs_g)} (task, init state) pairs: both "
+                     f"succeed {both}, only GLSR {won}, only global-only {len(lost)} (of those, "
+                     f"{sum(e['stopped_by'] == 'detector' for e in lost)} ended by the detector judging the task done, "
+                     f"{sum(e['stopped_by'] == 'time_limit' for e in lost)} at the time limit); {stops} GLSR episodes "
+                     f"in all ended on a detector verdict while the task was not done.")
     for label, _, eps in runs:
         faults = sum(bool(e["fault"]) for e in eps)
         viol = max(e["max_joint_limit_violation_rad"] for e in eps)
