@@ -146,7 +146,9 @@ class ObjectMoved(Perturbation):
 
     def fire(self, runner, step):
         skill = _first_open_skill(runner)
-        if skill is None or runner.stack.sim.world.is_grasped(skill.obj):
+        world = runner.stack.sim.world
+        # a LIBERO joint skill's object is a fixture or a region (a drawer, the stove): nothing to move
+        if skill is None or skill.obj not in world.objects or world.is_grasped(skill.obj):
             return None
         return _relocate(runner, skill.obj, self.strength, self.rng)
 

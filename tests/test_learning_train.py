@@ -14,7 +14,7 @@ import torch  # noqa: E402
 from learning_synth import agentview_camera, make_demo_file  # noqa: E402
 from safetensors.torch import load_file  # noqa: E402
 
-from tcot_hybrid.errors import ConfigError  # noqa: E402
+from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 from tcot_hybrid.learning.checkpoint import load_checkpoint  # noqa: E402
 from tcot_hybrid.learning.data import instructions_of, load_frames  # noqa: E402
 from tcot_hybrid.data.labels import TrajectoryWindowConfig, windows_from_meta  # noqa: E402
@@ -410,3 +410,14 @@ def test_detect_only_finetune_config_is_checked(demo_file, tmp_path):
              mix_stage2=MixConfig(global_frac=0.0, local_frac=0.0, detect_frac=1.0))
     with pytest.raises(ConfigError, match="model.detect_head needs model.kind 'trajectory'"):
         ModelConfig(kind="direct", detect_head=True)
+
+
+def test_online_split_sizes_follow_the_seed_rule(online_file, tmp_path, camera):
+    from tcot_hybrid.learning.data import online_split_size
+
+    assert online_split_size(online_file, "train") == 10 and online_split_size(online_file, "valid") == 2
+    one_seed = tmp_path / "one_seed.hdf5"  # one rollout per task at seed 200: the whole file is validation
+    make_demo_file(one_seed, camera, seeds=[200], T=24)
+    assert online_split_size(one_seed, "train") == 0 and online_split_size(one_seed, "valid") == 1
+    with pytest.raises(DatasetError, match="split must be"):
+        online_split_size(online_file, "test")

@@ -133,6 +133,18 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
                             height_ref=height_ref)
 
 
+def online_split_size(path: str | Path, split: str) -> int:
+    """Episodes of online file ``path`` in ``split`` (by seed, as :func:`load_online_frames` splits them): a file of
+    one seed per task (e.g. one rollout per task and perturbation) falls wholly into one split."""
+    from tcot_hybrid.data.dataset import is_valid_seed
+
+    if split not in ("train", "valid"):
+        raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
+    with open_demos(path) as f:
+        every = int(f.valid_every)
+        return sum(is_valid_seed(i.seed, every) == (split == "valid") for i in f.infos())
+
+
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                        max_tokens: int, direct_horizon: int, frame_stride: int = 1, height_ref: str = "world") -> FrameSet:
     """Online episodes of ``path`` (split by seed like the demos, failed episodes included), every

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.errors import ConfigError, DatasetError
 from tcot_hybrid.learning.batches import Batcher
 from tcot_hybrid.learning.losses import detect_loss, direct_loss, trajectory_loss
 from tcot_hybrid.learning.train_config import MixConfig, TrainConfig
@@ -115,7 +115,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     from tqdm import tqdm
 
     from tcot_hybrid.learning.checkpoint import camera_meta, save_checkpoint, versions
-    from tcot_hybrid.learning.data import concat_frames, env_of, file_hash, instructions_of, load_frames, load_online_frames
+    from tcot_hybrid.learning.data import (concat_frames, env_of, file_hash, instructions_of, load_frames,
+                                           load_online_frames, online_split_size)
     from tcot_hybrid.learning.model import PlannerNet, count_parameters
     from tcot_hybrid.learning.vocab import Vocabulary
 
@@ -147,13 +148,19 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
         vas.append(ex_va)
     for path in cfg.online_data:
         _check_same_env(env, env_of(path)[0], path, cfg.data)
-        on_tr, on_va = (load_online_frames(path, split, vocab, frame_stride=cfg.online_frame_stride, **load)
-                        for split in ("train", "valid"))
+        if online_split_size(path, "train") == 0:
+            raise DatasetError(f"online data file {path}: no episode falls in the training split (seed % "
+                               f"valid_every != 0); collect it with other seeds or another --valid-every")
+        on_tr = load_online_frames(path, "train", vocab, frame_stride=cfg.online_frame_stride, **load)
+        trs.append(on_tr)
+        # a file of one seed per task lies wholly in one split: validation then rests on the other files
+        on_va = (load_online_frames(path, "valid", vocab, frame_stride=cfg.online_frame_stride, **load)
+                 if online_split_size(path, "valid") else None)
         log(f"online data {path}: {len(on_tr.demos)} train episodes / {len(on_tr)} frames "
             f"({int(on_tr.traj.sum())} with recovery trajectories, {int(on_tr.success.sum())} success), "
-            f"{len(on_va.demos)} valid episodes / {len(on_va)} frames")
-        trs.append(on_tr)
-        vas.append(on_va)
+            + (f"{len(on_va.demos)} valid episodes / {len(on_va)} frames" if on_va is not None else "no valid episodes"))
+        if on_va is not None:
+            vas.append(on_va)
     tr, va = concat_frames(trs), concat_frames(vas)
     del trs, vas
     data_hash = "+".join(file_hash(p) for p in data_files)

@@ -457,7 +457,11 @@ class PickPlace(LiberoSkill):
         obj_pos = world.pos(self.obj) if not effects else ctx.point_after(
             world.pos(self.obj), int(ctx.bodies[self.obj][0]), effects)
         if held:
-            return self._plan_with(world, effects, held, obj_pos, world.tcp_pos(), world.tcp_rot())
+            out = self._plan_with(world, effects, held, obj_pos, world.tcp_pos(), world.tcp_rot())
+            if out.get("blocked"):  # as held now (e.g. grasped off-centre), it does not fit through the opening
+                raise PlanningError(f"oracle: {self.obj!r} as held now does not fit into {self.dest.target!r} "
+                                    "(the hand or the object hits the opening's edges)")
+            return out
         best = self.grasp(world, effects)
         # plans live in the planner camera's pixels: a grasp whose lift or carry leaves the view (a wine bottle
         # held by its top, carried over the rack) gives way to the next one whose whole plan stays in view

@@ -32,3 +32,11 @@ def test_offcenter_grasp_is_refused_by_name_where_nothing_is_picked_up():
     result = EpisodeRunner(cfg).run()
     assert result["perturbation_fired"] is False
     assert "no pick-and-place" in result["perturbation_note"]
+
+
+def test_object_moved_on_a_joint_task_reports_not_fired_instead_of_crashing():
+    # the stove's knob skill names a fixture, not a movable object: object_moved used to raise a KeyError
+    cfg = RunConfig(task="libero_goal:turn_on_the_stove", seed=100, init="sampled", planner="oracle",
+                    perturb=PerturbConfig(name="object_moved"))
+    result = EpisodeRunner(cfg).run()
+    assert result["fault"] is None and result["perturbation_fired"] is False
