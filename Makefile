@@ -148,7 +148,7 @@ else
 endif
 	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
 		|| (tail -5 runs/libero/direct_train.log; exit 1)
-	grep -v "it/s\|s/it\|step/s" runs/libero/direct_train.log > docs/libero-planner/direct_train.log
+	tr "\r" "\n" < runs/libero/direct_train.log | grep -v "it/s\|s/it\|step/s\|^ *$$" > docs/libero-planner/direct_train.log
 	cp runs/libero/direct.metrics.jsonl docs/libero-planner/direct_train.metrics.jsonl
 	cp runs/libero/direct.safetensors tcot_hybrid/checkpoints/libero_panda_direct_default.safetensors
 	cp runs/libero/direct.json tcot_hybrid/checkpoints/libero_panda_direct_default.json
