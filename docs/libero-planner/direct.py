@@ -77,7 +77,7 @@ def eval_lines() -> list[str]:
     suites = [s for s in SUITES if s in got]
     k, n = sum(v[0] for v in got.values()), sum(v[1] for v in got.values())
     events = Counter(ev["kind"] for e in eps for ev in e["events"])
-    reasons = Counter(re.sub(r"[-\d.,\[\] ]+", " ", ev.get("reason", "")).split(" m projects")[0][:60].strip()
+    reasons = Counter(re.split(r"[-\d\[(]", ev.get("reason", ""), maxsplit=1)[0].strip()[:60]
                       for e in eps for ev in e["events"] if ev["kind"] == "plan_rejected")
     steps = sum(e["steps"] for e in eps)
     stopped = Counter(e["stopped_by"] for e in eps)
@@ -92,13 +92,17 @@ def eval_lines() -> list[str]:
                                                                           else " |"), ""]
     faults = sum(bool(e["fault"]) for e in eps)
     viol = max(e["max_joint_limit_violation_rad"] for e in eps)
+    ik = sorted(ev["pos_err_m"] for e in eps for ev in e["events"] if ev["kind"] == "ik_not_converged")
+    sat = [e["safety"]["saturations"] / max(e["safety"]["ticks"], 1) for e in eps]
     lines.append(
         f"- Every planner step asked the network (a one-waypoint plan, lifted, solved by IK, timed by Ruckig, tracked "
         f"by the controller): {steps} steps, {events['plan_adopted']} plans adopted, {events['plan_rejected']} "
-        f"refused by the planner or the lift, {events.get('plan_stale', 0)} over the latency budget; "
-        f"IK failures {sum(e['ik_failures'] for e in eps)}; faulted episodes {faults} (none counted as success); "
-        f"worst joint-limit violation {viol:.4f} rad; episodes ended by "
-        + ", ".join(f"{v} {k}" for k, v in sorted(stopped.items())) + ".")
+        f"refused by the planner or the lift, {events.get('plan_stale', 0)} over the latency budget; IK left "
+        f"{len(ik)} waypoints unconverged" + (f" (position error median {1e3 * ik[len(ik) // 2]:.1f} mm, at most "
+                                               f"{1e3 * ik[-1]:.1f} mm)" if ik else "")
+        + f"; a torque at its limit on {100 * sum(sat) / len(sat):.0f} % of control ticks (mean over episodes); "
+        f"faulted episodes {faults} (none counted as success); worst joint-limit violation {viol:.4f} rad; episodes "
+        f"ended by " + ", ".join(f"{k}: {v}" for k, v in sorted(stopped.items())) + ".")
     if reasons:
         lines.append("- Refusals: " + "; ".join(f"{v}x \"{k}\"" for k, v in reasons.most_common(3)) + ".")
     return lines

@@ -1,6 +1,7 @@
 """The paper's direct (next-action) baseline on LIBERO: its TCP in the world frame plans are lifted in (the robot's
 mounting pose, not the world origin), a checkpoint that records its world and is refused in the other one, and one
-short episode through lift → IK → Ruckig → controller on a tiny budget, the hand held at its starting orientation."""
+short episode through lift → IK → Ruckig → controller on a tiny budget, the hand held at its starting
+orientation."""
 import dataclasses
 import json
 
