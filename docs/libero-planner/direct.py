@@ -81,8 +81,13 @@ def eval_lines() -> list[str]:
                       for e in eps for ev in e["events"] if ev["kind"] == "plan_rejected")
     steps = sum(e["steps"] for e in eps)
     stopped = Counter(e["stopped_by"] for e in eps)
-    how = (f"{len(eps)} episodes, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} worker(s)" if r
-           else f"{len(eps)} episodes")
+    tasks = len({e["task"] for e in eps})
+    how = (f"{len(eps)} episodes on {tasks} tasks, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} worker(s)"
+           if r and r["ran_now"] == r["episodes"] == len(eps)
+           else f"{len(eps)} episodes on {tasks} tasks: the run was stopped before it finished (CPU shared with longer "
+                f"jobs), these are the episodes it completed, in its task order")
+    walls = sorted(e["wall_time_s"] for e in eps)
+    how += f"; {walls[0]:.0f}-{walls[-1]:.0f} s wall per episode"
     lines = [f"**Direct baseline, sampled development layouts, seeds {seeds[0]}-{seeds[-1]}** "
              f"(`docs/libero-planner/eval-direct/`, {how}; development seeds, docs/seeds.md: not a reporting "
              f"figure):", "",
