@@ -138,7 +138,8 @@ ifeq ($(LIBERO_PLANNER_EPISODES),10)
 else
 	$(BIN)/tcot train --config examples/configs/train_libero50.yaml --resume >> runs/libero/train50.log 2>&1 \
 		|| (tail -5 runs/libero/train50.log; exit 1)
-	grep -v "it/s\|s/it\|step/s" runs/libero/train50.log > docs/libero-planner/train50.log
+	tr '\r' '\n' < runs/libero/train50.log | grep -v "it/s\|s/it\|step/s\|s/step\|^\s*$$\|WARNING\|macro" \
+		> docs/libero-planner/train50.log
 	cp runs/libero/planner50.metrics.jsonl docs/libero-planner/train50.metrics.jsonl
 	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
 		sys.exit(0 if run_finished('runs/libero/planner50.safetensors') else 3)" \
@@ -153,7 +154,7 @@ endif
 	cp runs/libero/direct.safetensors tcot_hybrid/checkpoints/libero_panda_direct_default.safetensors
 	cp runs/libero/direct.json tcot_hybrid/checkpoints/libero_panda_direct_default.json
 	$(BIN)/python docs/libero-planner/direct.py
-	$(BIN)/python docs/libero-planner/heldout.py --out docs/libero-planner/heldout.json
+	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --out docs/libero-planner/heldout.json
 	$(BIN)/python docs/libero-planner/summarize.py
 
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md

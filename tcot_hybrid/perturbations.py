@@ -201,6 +201,12 @@ class OffCentreGrasp(Perturbation):
     default_at_step = 1
 
     def cannot_apply(self, task, planner, last_step):
+        if task.world_kind == "libero":
+            from tcot_hybrid.libero.skills import PickPlace as LiberoPickPlace
+
+            if not any(isinstance(s, LiberoPickPlace) for s in task.skills()):
+                return f"task {task.name} has no pick-and-place (the grasp it nudges)"
+            return super().cannot_apply(task, planner, last_step)
         from tcot_hybrid.tasks.base import PickPlace
 
         if not any(isinstance(s, PickPlace) for s in task.skills()):  # fire() also checks the object's kind
@@ -211,6 +217,8 @@ class OffCentreGrasp(Perturbation):
         sim = runner.stack.sim
         world = sim.world
         skill = _first_open_skill(runner)
+        if runner.stack.task.world_kind == "libero":
+            return self._fire_libero(world, skill)
         if skill is None or world.objects[skill.obj].kind not in ("cube", "cylinder"):
             return None
         p, tcp = world.pos(skill.obj), sim.tcp_pos()
@@ -219,6 +227,33 @@ class OffCentreGrasp(Perturbation):
         d = self.strength * float(self.rng.choice([-1.0, 1.0]))
         world.set_pose(skill.obj, (p[0] + d, p[1], p[2]), 0.0)
         return {"object": skill.obj, "moved_m": [round(d, 4), 0.0, 0.0]}
+
+
+    def _fire_libero(self, world, skill) -> dict | None:
+        """LIBERO's grasps are rims, handles and sides, not centres: the object is shifted along the open fingers'
+        closing axis (made horizontal) once the fingertips are at it, i.e. inside its bounding box grown by
+        GRASP_REACH_M, the moment before they close."""
+        from tcot_hybrid.libero.skills import PickPlace as LiberoPickPlace
+
+        if not isinstance(skill, LiberoPickPlace) or skill.obj not in world.objects or not world.fingers_open() \
+                or world.touching(skill.obj, world.finger_geoms):
+            return None
+        from tcot_hybrid.libero.geometry import collision_boxes, subtree_bodies
+
+        boxes = collision_boxes(world.model, world.data, subtree_bodies(world.model, world.model.body(
+            world.objects[skill.obj].body).id))
+        lo, hi = boxes.aabb()
+        if not np.all((world.tcp_pos() >= lo - GRASP_REACH_M) & (world.tcp_pos() <= hi + GRASP_REACH_M)):
+            return None
+        closing = world.tcp_rot()[:, 0] * np.array([1.0, 1.0, 0.0])
+        if np.linalg.norm(closing) < 0.3:  # fingers closing almost vertically (a drawer-style pinch): no sideways slip
+            return None
+        d = self.strength * float(self.rng.choice([-1.0, 1.0])) * closing / np.linalg.norm(closing)
+        world.shift(skill.obj, d)
+        return {"object": skill.obj, "moved_m": np.round(d, 4).tolist()}
+
+
+GRASP_REACH_M = 0.01  # [m] LIBERO off-centre grasp: the fingertips count as at the object this far outside its box
 
 
 class ArmPush(Perturbation):

@@ -66,6 +66,9 @@ class BuiltScene:
     objects:       the task's objects by name (what the predicates, the oracle and perturbations know)
     support_z:     world height of the surface objects rest on [m] (the table top; 0 in the workcell)
     render_option: scene option for every render (e.g. collision geoms hidden), None for MuJoCo's default
+    renderers:     a renderer cache the scene owns and keeps across the episodes that reuse it (a LIBERO scene's
+                   renderer takes ~1 s to make: its textures go to the GL context); None = each simulation makes
+                   and closes its own
     """
 
     model: mujoco.MjModel
@@ -74,6 +77,7 @@ class BuiltScene:
     support_z: float = TABLE_TOP_Z
     render_option: mujoco.MjvOption | None = None
     scene_flags_off: tuple[int, ...] = ()  # mjtRndFlag values switched off in every renderer (e.g. skybox)
+    renderers: dict | None = None
 
 
 def check_camera(model: mujoco.MjModel, name: str) -> None:

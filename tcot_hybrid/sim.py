@@ -74,7 +74,9 @@ class Simulation:
         self.T_world_base = base_transform(robot, m, self.data)
         self.T_base_world = np.linalg.inv(self.T_world_base)
         self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
-        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        # (width, height) -> renderer; the scene's own cache when it keeps one across episodes
+        self._owns_renderers = built.renderers is None
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {} if built.renderers is None else built.renderers
         self._fault: SimFault | None = None
         self._time_offset = 0.0  # [s] simulated time lost to MuJoCo's own resets of a diverged state
 
@@ -198,9 +200,10 @@ class Simulation:
         return r.render().copy()
 
     def close(self) -> None:
-        for r in self._renderers.values():
-            r.close()
-        self._renderers.clear()
+        if self._owns_renderers:
+            for r in self._renderers.values():
+                r.close()
+            self._renderers.clear()
         self.task.release_scene()
 
 

@@ -31,6 +31,28 @@ def test_trajectory_outputs_shapes_and_ranges():
     assert torch.equal(d["success_logit"], o["success_logit"]) and torch.equal(d["grip_logit"], o["grip_logit"])
 
 
+@pytest.mark.parametrize("rot_head,radius", [(False, 0), (True, 0), (True, 2)])
+def test_a_waypoint_slice_computes_exactly_those_waypoints(rot_head, radius):
+    m = PlannerNet(ModelConfig(vocab_size=10, width=8, rot_head=rot_head, readout_radius_cells=radius)).eval()
+    with torch.no_grad():  # random maps: give the heads a non-trivial spread
+        m.maps.bias.copy_(torch.randn(m.maps.bias.shape, generator=torch.Generator().manual_seed(1)))
+    with torch.inference_mode():
+        full = m(*_inputs())
+        for sl in (slice(25, 51), slice(51, 60), slice(7, 8)):
+            part = m(*_inputs(), waypoints=sl)
+            n = len(range(60)[sl])
+            assert part["uv_px"].shape == (3, n, 2) and part["grip_logit"].shape == (3, n)
+            for k in ("uv_px", "z_m", "grip_logit", "heat_logits") + (("rot6",) if rot_head else ()):
+                torch.testing.assert_close(part[k], full[k][:, sl], rtol=1e-5, atol=1e-5)
+            assert torch.equal(part["success_logit"], full["success_logit"])
+
+
+def test_a_waypoint_slice_needs_the_heatmap_head():
+    f = PlannerNet(ModelConfig(head="fc", vocab_size=10, width=8)).eval()
+    with torch.inference_mode(), pytest.raises(ValueError, match="heatmap"):
+        f(*_inputs(), waypoints=slice(0, 5))
+
+
 def test_direct_and_fc_variants():
     d = PlannerNet(ModelConfig(kind="direct", vocab_size=10, width=8)).eval()
     with torch.inference_mode():

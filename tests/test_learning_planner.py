@@ -404,7 +404,9 @@ def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_p
         out = real(*a, **k)
         if "uv_px" in out:
             out["z_m"] = torch.full_like(out["z_m"], 0.3 - cam_z)  # 0.3 m in the world
-            out["rot6"] = torch.from_numpy(matrix_to_rot6(R_cam) * 2.0)[None].float()  # unnormalised columns
+            sel = k.get("waypoints")  # the planner asks for its executed waypoints only
+            R = R_cam[sel] if isinstance(sel, slice) else R_cam
+            out["rot6"] = torch.from_numpy(matrix_to_rot6(R) * 2.0)[None].float()  # unnormalised columns
         return out
     monkeypatch.setattr(p.model, "forward", fixed)
     g = p.plan(_obs(), mode="global")

@@ -8,7 +8,8 @@ the figures training logs (:func:`tcot_hybrid.learning.validation.trajectory_met
 through its own camera), once per heatmap read-out: ``readout_radius_cells`` 0 (soft-argmax over the whole map, what
 training optimises) and 2 (soft-argmax around the peak, the workcell's). Per suite: the global plan's pixel error at
 every step and at t = 0, and at t = 0 the error of the plan's first grasp point (the first waypoint whose labelled
-gripper bit is closed: is the plan going to the right object?).
+gripper bit is closed: is the plan going to the right object?). And the same t = 0 errors with every instruction
+reworded (:func:`reworded`).
 """
 from __future__ import annotations
 
@@ -36,6 +37,56 @@ def first_grasp_errors(uv: np.ndarray, uv_true: np.ndarray, grip_true: np.ndarra
         if k.size:
             out[i] = float(np.linalg.norm(uv[i, k[0]] - uv_true[i, k[0]]))
     return out
+
+
+def reworded(ck, frames, traj: np.ndarray, uv_true: np.ndarray, grip_true: np.ndarray, center: int) -> dict:
+    """t = 0 global plans with each instruction replaced by its rewording (``PARAPHRASES``: verbs, prepositions and
+    word order changed, objects' names kept): first-grasp and whole-plan pixel errors beside the original wording's,
+    and the rewordings the planner would refuse (more unknown words than the checkpoint's ``max_unknown_fraction``;
+    measured anyway, with the unknown words as <unk>)."""
+    import torch
+
+    from tcot_hybrid.errors import PlanningError
+    from tcot_hybrid.learning.evaluate import PARAPHRASES
+    from tcot_hybrid.learning.validation import predict
+    from tcot_hybrid.learning.vocab import Vocabulary
+
+    vocab = Vocabulary(tuple(ck.meta["vocabulary"]))
+    max_unknown = float(ck.meta.get("max_unknown_fraction", 0.5))
+    ng = ck.model.cfg.n_global
+    t0 = frames.t[traj] == 0
+    rows = traj[t0]
+    saved = frames.tokens.clone()
+    missing, refused, unknown = [], [], []
+    out = {}
+    try:
+        for label in ("original", "reworded"):
+            if label == "reworded":
+                for di, instr in enumerate(frames.instructions):
+                    para = PARAPHRASES.get(instr)
+                    if para is None:
+                        missing.append(instr)
+                        continue
+                    ids, n_words, n_unknown = vocab.encode(para, ck.model.cfg.max_tokens)
+                    unknown.append(n_unknown / max(n_words, 1))
+                    try:
+                        vocab.encode_checked(para, ck.model.cfg.max_tokens, max_unknown_fraction=max_unknown)
+                    except PlanningError:
+                        refused.append(para)
+                    frames.tokens[frames.demo == di] = torch.from_numpy(ids)
+            g = predict(ck.model, frames, rows, "global")
+            uv = g["uv_px"][:, center:ng]
+            px = np.linalg.norm(uv - uv_true[t0], axis=-1)
+            grasp = first_grasp_errors(uv, uv_true[t0], grip_true[t0])
+            grasp = grasp[np.isfinite(grasp)]
+            out[label] = {"t0_px_median": round(float(np.median(px)), 2),
+                          "t0_first_grasp_px_median": round(float(np.median(grasp)), 2),
+                          "t0_first_grasp_within_5px": round(float((grasp < 5).mean()), 3)}
+    finally:
+        frames.tokens.copy_(saved)
+    return {**out, "instructions": len(set(frames.instructions)), "without_rewording": sorted(set(missing)),
+            "refused": sorted(set(refused)), "unknown_word_fraction_median": round(float(np.median(unknown)), 3),
+            "t0_plans": int(t0.sum())}
 
 
 def _rel(path: str) -> str:
@@ -90,6 +141,8 @@ def evaluate(checkpoint: str, data: str, radii: tuple[int, ...]) -> dict:
                                      "t0_first_grasp_within_5px": round(float((ga < 5).mean()), 3),
                                      "t0_first_grasp_over_20px": round(float((ga >= 20).mean()), 3),
                                      "t0_first_grasp_plans": int(ga.size), "per_suite": per_suite}
+    model.cfg = dataclasses.replace(model.cfg, readout_radius_cells=int(meta["model"]["readout_radius_cells"]))
+    res["reworded"] = reworded(ck, frames, traj, frames.g_uv[traj][:, c:].numpy(), frames.g_grip[traj][:, c:].numpy(), c)
     return res
 
 

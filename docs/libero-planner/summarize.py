@@ -7,8 +7,9 @@
     make libero-planner-eval   # tcot eval, shipped init states: docs/libero-planner/eval-shipped/
     .venv/bin/python docs/libero-planner/summarize.py
 
-docs/libero-planner/eval-shipped-first/ is the same evaluation of the first checkpoint (the first training run alone,
-read out around the heatmap's peak), kept beside it.
+docs/libero-planner/eval-shipped-first/ and eval-shipped-400/ are the same evaluation of the 400-demonstration
+checkpoints (eval-shipped-400: the one shipped before the 2000-demonstration run; eval-shipped-first: its first
+training run alone, read out around the heatmap's peak), kept beside it.
 """
 from __future__ import annotations
 
@@ -61,18 +62,22 @@ def build_lines() -> list[str]:
     total = 0.0
     for i, (name, config) in enumerate(runs):
         log_p, met_p = HERE / f"{name}.log", HERE / f"{name}.metrics.jsonl"
-        parts = [float(x) for x in re.findall(r"total time ([\d.]+) min", log_p.read_text())] if log_p.is_file() else []
-        # a resumed run's log (tcot train --resume, appended) has one "total time" line per part
+        text = log_p.read_text() if log_p.is_file() else ""
         epochs = [json.loads(x) for x in met_p.read_text().splitlines() if x.strip()] if met_p.is_file() else []
+        # a resumed run's log (tcot train --resume, appended) starts one part per invocation; its metrics' elapsed_s
+        # counts every saved epoch of every part (a part cut by a session's end loses only its unfinished epoch)
+        n_parts = max(1, len(re.findall(r"^(?:--resume: no training state|resumed from )", text, re.M)))
+        wall = (epochs[-1]["elapsed_s"] / 60 if epochs and "elapsed_s" in epochs[-1]
+                else sum(float(x) for x in re.findall(r"total time ([\d.]+) min", text)))
         cfg = yaml.safe_load((ROOT / config).read_text())
         best = min(epochs, key=lambda e: e["score"])["epoch"] if epochs else "?"
-        total += sum(parts)
+        total += wall
         lines.append(f"- **Training run {i + 1}** (`{config}`; `docs/libero-planner/{name}.log`, `{name}.metrics.jsonl`)"
                      + (f", from run {i}'s weights" if i else "")
                      + f": {len(epochs)} epochs (best {best}) of at most {cfg['max_epochs']}, peak lr {cfg['lr']}, cap "
-                     f"{cfg['max_minutes']} min" + (f", {sum(parts):.1f} min wall (loading, training, validation, "
-                                                     f"saving" + (f"; in {len(parts)} parts" if len(parts) > 1 else "")
-                                                     + ")" if parts else "") + ".")
+                     f"{cfg['max_minutes']} min" + (f", {wall:.1f} min (loading, training, validation, saving"
+                                                     + (f"; in {n_parts} parts joined by --resume" if n_parts > 1 else "")
+                                                     + ")" if wall else "") + ".")
     lines.append(f"- **Shipped checkpoint** (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`, {size_mb:.1f} MB): "
                  f"the last run's best epoch; {meta['train_demos']} training demos / {meta['train_frames']} frames; "
                  f"{total:.1f} min of training in all; heatmap read-out radius "
@@ -95,8 +100,9 @@ def build_lines() -> list[str]:
 
 def heldout_lines() -> list[str]:
     """The read-out comparison and the per-suite breakdown (docs/libero-planner/heldout.py)."""
-    rows = [(label, json.loads(p.read_text())) for label, p in (("first run", HERE / "heldout-first.json"),
-                                                                 ("shipped", HERE / "heldout.json")) if p.is_file()]
+    rows = [(label, json.loads(p.read_text())) for label, p in (
+        ("400 demos, first run", HERE / "heldout-first.json"), ("400 demos, shipped before", HERE / "heldout-400.json"),
+        ("shipped", HERE / "heldout.json")) if p.is_file()]
     if not rows:
         return []
     lines = ["", "By heatmap read-out (`docs/libero-planner/heldout.py` → `heldout-first.json`, `heldout.json`; median "
@@ -123,10 +129,22 @@ def heldout_lines() -> list[str]:
             w5 = "-" if x["t0_first_grasp_within_5px"] is None else f"{x['t0_first_grasp_within_5px']:.2f}"
             lines.append(f"| {s} | {x['plans_t0']} | {x['global_px_median']:.2f} | {x['global_t0_px_median']:.2f} | "
                          f"{fg} | {w5} |")
+    rw = r.get("reworded")
+    if rw:
+        lines += ["", f"**Reworded instructions** ({label}; `heldout.py`: each of the {rw['instructions']} instructions "
+                  f"replaced by one rewording, `tcot_hybrid.learning.evaluate.PARAPHRASES`, verbs, prepositions and "
+                  f"word order changed, objects' names kept; median {rw['unknown_word_fraction_median']:.0%} of a "
+                  f"rewording's words unknown to the checkpoint; {len(rw['refused'])} rewordings the planner would "
+                  f"refuse): on the {rw['t0_plans']} held-out t = 0 plans, median pixel error "
+                  f"{rw['original']['t0_px_median']:.2f} → {rw['reworded']['t0_px_median']:.2f} px, first grasp "
+                  f"{rw['original']['t0_first_grasp_px_median']:.2f} → {rw['reworded']['t0_first_grasp_px_median']:.2f} "
+                  f"px, first grasp within 5 px {rw['original']['t0_first_grasp_within_5px']:.2f} → "
+                  f"{rw['reworded']['t0_first_grasp_within_5px']:.2f}."]
     return lines
 
 
-EVALS = (("first checkpoint", "eval-shipped-first"), ("shipped checkpoint", "eval-shipped"))
+EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shipped-400"),
+         ("shipped checkpoint", "eval-shipped"))
 
 
 def _episodes(name: str) -> list[dict]:

@@ -34,6 +34,65 @@ PARAPHRASES = {
     "stack the green block on the red block and the blue block on the green block":
         "place the green block onto the red block then the blue block onto the green block",
     "use the stick to pull the cube into reach": "grab the stick and drag the cube closer",
+    # LIBERO's four suites (docs/libero-planner.md, "Reworded instructions"): verbs, prepositions and word order
+    # changed, the objects' names kept
+    "open the middle drawer of the cabinet": "pull open the cabinet's middle drawer",
+    "open the top drawer and put the bowl inside": "pull the top drawer open and set the bowl in it",
+    "pick up the alphabet soup and place it in the basket": "grab the alphabet soup and drop it into the basket",
+    "pick up the bbq sauce and place it in the basket": "grab the bbq sauce and drop it into the basket",
+    "pick up the black bowl between the plate and the ramekin and place it on the plate":
+        "take the black bowl that sits between the plate and the ramekin and set it onto the plate",
+    "pick up the black bowl from table center and place it on the plate":
+        "take the black bowl in the center of the table and set it onto the plate",
+    "pick up the black bowl in the top drawer of the wooden cabinet and place it on the plate":
+        "take the black bowl out of the wooden cabinet's top drawer and set it onto the plate",
+    "pick up the black bowl next to the cookie box and place it on the plate":
+        "take the black bowl beside the cookie box and set it onto the plate",
+    "pick up the black bowl next to the plate and place it on the plate":
+        "take the black bowl beside the plate and set it onto the plate",
+    "pick up the black bowl next to the ramekin and place it on the plate":
+        "take the black bowl beside the ramekin and set it onto the plate",
+    "pick up the black bowl on the cookie box and place it on the plate":
+        "take the black bowl lying on the cookie box and set it onto the plate",
+    "pick up the black bowl on the ramekin and place it on the plate":
+        "take the black bowl resting on the ramekin and set it onto the plate",
+    "pick up the black bowl on the stove and place it on the plate":
+        "take the black bowl from the stove and set it onto the plate",
+    "pick up the black bowl on the wooden cabinet and place it on the plate":
+        "take the black bowl from the top of the wooden cabinet and set it onto the plate",
+    "pick up the book and place it in the back compartment of the caddy":
+        "grab the book and slide it into the caddy's back compartment",
+    "pick up the butter and place it in the basket": "grab the butter and drop it into the basket",
+    "pick up the chocolate pudding and place it in the basket": "grab the chocolate pudding and drop it into the basket",
+    "pick up the cream cheese and place it in the basket": "grab the cream cheese and drop it into the basket",
+    "pick up the ketchup and place it in the basket": "grab the ketchup and drop it into the basket",
+    "pick up the milk and place it in the basket": "grab the milk and drop it into the basket",
+    "pick up the orange juice and place it in the basket": "grab the orange juice and drop it into the basket",
+    "pick up the salad dressing and place it in the basket": "grab the salad dressing and drop it into the basket",
+    "pick up the tomato sauce and place it in the basket": "grab the tomato sauce and drop it into the basket",
+    "push the plate to the front of the stove": "slide the plate in front of the stove",
+    "put both moka pots on the stove": "set the two moka pots onto the stove",
+    "put both the alphabet soup and the cream cheese box in the basket":
+        "drop the alphabet soup and the cream cheese box into the basket",
+    "put both the alphabet soup and the tomato sauce in the basket":
+        "drop the alphabet soup and the tomato sauce into the basket",
+    "put both the cream cheese box and the butter in the basket": "drop the cream cheese box and the butter into the basket",
+    "put the black bowl in the bottom drawer of the cabinet and close it":
+        "set the black bowl into the cabinet's bottom drawer then shut it",
+    "put the bowl on the plate": "set the bowl onto the plate",
+    "put the bowl on the stove": "set the bowl onto the stove",
+    "put the bowl on top of the cabinet": "set the bowl on the cabinet's top",
+    "put the cream cheese in the bowl": "drop the cream cheese into the bowl",
+    "put the white mug on the left plate and put the yellow and white mug on the right plate":
+        "set the white mug onto the left plate and the yellow and white mug onto the right plate",
+    "put the white mug on the plate and put the chocolate pudding to the right of the plate":
+        "set the white mug onto the plate and the chocolate pudding right of the plate",
+    "put the wine bottle on the rack": "set the wine bottle onto the rack",
+    "put the wine bottle on top of the cabinet": "set the wine bottle on the cabinet's top",
+    "put the yellow and white mug in the microwave and close it":
+        "set the yellow and white mug inside the microwave then shut it",
+    "turn on the stove": "switch the stove on",
+    "turn on the stove and put the moka pot on it": "switch the stove on and set the moka pot onto it",
 }
 
 

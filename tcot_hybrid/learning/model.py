@@ -275,24 +275,36 @@ class PlannerNet(nn.Module):
         pooled = torch.cat([f16.float().mean((2, 3)), spatial_keypoints(f16), cond.float()], dim=1)
         return f4, f8, f16, pooled
 
-    def forward(self, image, tokens, mode, proprio, *, waypoints: bool = True) -> dict[str, torch.Tensor]:
-        """``waypoints=False`` skips the heatmap decoder (the detect prompt needs only the pooled head)."""
+    def forward(self, image, tokens, mode, proprio, *, waypoints: bool | slice = True) -> dict[str, torch.Tensor]:
+        """``waypoints=False`` skips the heatmap decoder (the detect prompt needs only the pooled head); a slice of
+        the ``n_waypoints`` (heatmap head) computes only those waypoints' maps, and every per-waypoint output then
+        covers just them (a planner call needs one head's executed waypoints: a global plan 26 of 60, a local 9)."""
         cfg = self.cfg
         cond = self.condition(tokens, mode, proprio)
         f4, f8, f16, pooled = self.encode(image, cond)
         if cfg.kind == "direct":
             out = self.action(pooled).float()
             return {"delta_m": out[:, :3] * cfg.delta_scale_m, "grip_logit": out[:, 3:4]}
-        n = cfg.n_waypoints
+        n_all = cfg.n_waypoints
+        sel = waypoints if isinstance(waypoints, slice) else slice(0, n_all)
+        if isinstance(waypoints, slice) and cfg.head != "heatmap":
+            raise ValueError(f"a waypoint slice needs model.head 'heatmap', got {cfg.head!r}")
+        ids = range(n_all)[sel]
+        n = len(ids)
         pl = self.pooled_head(pooled).float()
-        res = {"grip_logit": pl[:, :n],
-               "success_logit": self.detect_head(pooled).float()[:, 0] if cfg.detect_head else pl[:, n]}
-        if not waypoints:
+        res = {"grip_logit": pl[:, :n_all][:, sel],
+               "success_logit": self.detect_head(pooled).float()[:, 0] if cfg.detect_head else pl[:, n_all]}
+        if waypoints is False:
             return res
         if cfg.head == "heatmap":
             x = F.relu(self.f8(self.u8(F.relu(f8 + F.interpolate(self.l16(f16), scale_factor=2, mode="nearest"))), cond))
             x = F.relu(self.f4(self.u4(F.relu(f4 + F.interpolate(self.l8(x), scale_factor=2, mode="nearest"))), cond))
-            maps = self.maps(x).float()
+            if n == n_all:
+                maps = self.maps(x).float()
+            else:  # only the selected waypoints' channels: heatmap, height and (component-major) orientation maps
+                rows = torch.as_tensor(list(ids), device=x.device)
+                rows = torch.cat([rows + k * n_all for k in range(self.maps.out_channels // n_all)])
+                maps = F.conv2d(x, self.maps.weight[rows], self.maps.bias[rows]).float()
             logits, heights = maps[:, :n], maps[:, n:2 * n]
             b, _, h, w = logits.shape
             prob = torch.softmax(logits.flatten(2), dim=-1)  # (B, n, h*w)

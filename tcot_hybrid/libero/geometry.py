@@ -40,9 +40,13 @@ class Boxes:
     def __len__(self) -> int:
         return len(self.geom)
 
+    def world_extents(self) -> np.ndarray:
+        """(N, 3) half extents of each box along the world axes [m] (its own world AABB is centre -/+ these)."""
+        return np.einsum("nij,nj->ni", np.abs(self.rot), self.half)
+
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
         """World axis-aligned bounds (lo, hi) of all boxes."""
-        ext = np.einsum("nij,nj->ni", np.abs(self.rot), self.half)
+        ext = self.world_extents()
         return (self.centre - ext).min(axis=0), (self.centre + ext).max(axis=0)
 
     def extents_in(self, R: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -59,7 +63,7 @@ class Boxes:
         """(P,) bool: which points lie inside any box grown by ``margin`` [m]."""
         if len(self) == 0 or len(points) == 0:
             return np.zeros(len(points), bool)
-        ext = np.einsum("nij,nj->ni", np.abs(self.rot), self.half) + margin
+        ext = self.world_extents() + margin
         lo, hi = points.min(axis=0), points.max(axis=0)
         keep = np.all((self.centre + ext >= lo) & (self.centre - ext <= hi), axis=1)
         if not keep.any():
@@ -78,7 +82,7 @@ def boxes_overlap(a: Boxes, b: Boxes, margin: float = 0.0) -> np.ndarray:
     if len(a) == 0 or len(b) == 0:
         return out
     # world AABBs first: most pairs are far apart
-    ext_a = np.einsum("nij,nj->ni", np.abs(a.rot), a.half)
+    ext_a = a.world_extents()
     ext_b = np.einsum("nij,nj->ni", np.abs(b.rot), b.half + margin)
     near = np.all(np.abs(b.centre[None] - a.centre[:, None]) <= ext_a[:, None] + ext_b[None] + 1e-9, axis=2)
     ia, ib = np.nonzero(near)

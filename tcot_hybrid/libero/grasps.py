@@ -115,7 +115,7 @@ def _ring(obj: Boxes, *, recentre: bool = False):
     half its length; a tilted bowl's highest boxes, all on one side, would shift the ring's instead)."""
     lo, hi = obj.aabb()
     centre = (lo + hi) / 2
-    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    ext = obj.world_extents()
     tops = obj.centre[:, 2] + ext[:, 2]
     top = tops.max()
     high = tops >= top - 0.02
@@ -199,7 +199,7 @@ def top_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     lo, hi = obj.aabb()
     height = hi[2] - lo[2]
     depth = min(0.03, 0.55 * height)
-    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    ext = obj.world_extents()
     in_slab = (obj.centre[:, 2] + ext[:, 2] >= hi[2] - depth) & (obj.centre[:, 2] - ext[:, 2] <= hi[2])
     slab = obj.select(in_slab)
     z = max(hi[2] - depth + 0.008, lo[2] + FINGER_BELOW_TCP_M + 0.004)
@@ -233,7 +233,7 @@ def part_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
     open hand spans is a candidate, the TCP 2.2 cm below the strip's top."""
     lo, hi = obj.aabb()
     height = hi[2] - lo[2]
-    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    ext = obj.world_extents()
     in_slab = obj.centre[:, 2] + ext[:, 2] >= hi[2] - min(0.03, 0.55 * height)
     found = []
     for yaw in candidate_yaws(obj):
@@ -280,7 +280,7 @@ def side_candidates(obj: Boxes, base_pos) -> list[tuple[np.ndarray, np.ndarray]]
     c = (lo + hi) / 2
     d0 = c[:2] - np.asarray(base_pos)[:2]
     d0 = d0 / np.linalg.norm(d0)
-    ext = np.einsum("nij,nj->ni", np.abs(obj.rot), obj.half)
+    ext = obj.world_extents()
     out = []
     for frac in (0.35, 0.5, 0.65):
         z = max(lo[2] + frac * height, lo[2] + 0.04)  # the palm (3.2 cm either side) stays off the support

@@ -17,6 +17,7 @@ PAD_CENTRE_M = 0.004  # [m] the finger pads' centre is this far behind the TCP a
 KNOB_EXTRA_RAD = 0.5  # [rad] a knob push goes this much past its goal (contact slips as the bar turns)
 KNOB_YAW_BACK_RAD = np.deg2rad(30.0)  # [rad] see MoveJoint._knob
 DOOR_EXTRA_RAD = 0.25  # [rad] a door push goes this much past its goal (see MoveJoint._door)
+RESUME_CLOSED_M = 0.03  # [m] a closed hand this near a joint move's closed stretch carries on from it (a replan)
 
 
 class MoveJoint(LiberoSkill):
@@ -46,15 +47,17 @@ class MoveJoint(LiberoSkill):
         axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
         anchor = d.xanchor[j].copy()
         if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE):
-            return self._slide(world, moving, axis, q_now, effects)
-        return self._hinge(world, moving, axis, anchor, q_now, effects)
+            kfs = self._slide(world, moving, axis, q_now, effects)
+        else:
+            kfs = self._hinge(world, moving, axis, anchor, q_now, effects)
+        return kfs if effects else carry_on_closed(kfs, world)
 
     # -- drawers ----------------------------------------------------------------------------------------
     def _slide(self, world, moving: Boxes, axis, q_now, effects) -> list[Keyframe]:
         """Pinch the handle bar horizontally (fingers above and below it), then move along the axis."""
         # the handle: the box that sticks out furthest towards the pull direction (-axis when opening is -q)
         pull = -axis  # direction the part moves as q decreases
-        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        ext = moving.world_extents()
         front = (moving.centre @ pull) + np.abs(ext @ np.abs(pull))
         i = int(np.argmax(front))
         handle_c = moving.centre[i].copy()
@@ -131,7 +134,7 @@ class MoveJoint(LiberoSkill):
         """Turn a knob by pushing the end of its top bar along its arc with the closed fingers (no wrist
         turn: a knob sits close to the robot's base, where turning the hand about it runs joint 7 into
         its torque limit)."""
-        ext = np.einsum("nij,nj->ni", np.abs(moving.rot), moving.half)
+        ext = moving.world_extents()
         tops = moving.centre[:, 2] + ext[:, 2]
         bar = tops >= tops.max() - 0.02
         r = np.linalg.norm(moving.centre[:, :2] - anchor[:2], axis=1)
@@ -186,6 +189,32 @@ class MoveJoint(LiberoSkill):
         kfs.append(kf(last.pos - np.append(rot_z(turn)[:2, :2] @ normal, 0.0) * 0.05, True, last.rot))
         kfs.append(kf(kfs[-1].pos + np.array([0, 0, 0.08]), True, last.rot))
         return kfs
+
+
+def carry_on_closed(kfs: list[Keyframe], world: World) -> list[Keyframe]:
+    """A replan while the fingers are closed on the part (a GLSR local plan mid-pull or mid-push) carries on along
+    the move's closed stretch (the first close up to the next open) from the piece of it nearest the hand, instead
+    of opening the fingers to approach the part again; unchanged when the fingers are open or the hand is more than
+    RESUME_CLOSED_M from that stretch. Each local replan used to open the fingers, back off and come back, so a
+    knob, a drawer pushed shut or a drawer pulled with a replan every 0.8 s never finished."""
+    if world.fingers_open():
+        return kfs
+    first = next((i for i, k in enumerate(kfs) if k.closed), None)
+    if first is None:
+        return kfs
+    end = next((i for i in range(first, len(kfs)) if not kfs[i].closed), len(kfs))
+    tcp = world.tcp_pos()
+    # distance to each piece (keyframe i to i + 1) of the stretch; a one-keyframe stretch is its point
+    dist = [segment_distance(tcp, kfs[i].pos, kfs[min(i + 1, end - 1)].pos) for i in range(first, max(first + 1, end - 1))]
+    nearest = int(np.argmin(dist))
+    return kfs[first + nearest:] if dist[nearest] <= RESUME_CLOSED_M else kfs
+
+
+def segment_distance(p, a, b) -> float:
+    """Distance from point ``p`` to the segment a-b [m]."""
+    ab = b - a
+    t = 0.0 if ab @ ab < 1e-12 else float(np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * ab)))
 
 
 ARC_STEP_RAD = 0.15  # [rad] keyframe spacing along a knob's or a door's arc

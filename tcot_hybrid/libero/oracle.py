@@ -183,7 +183,7 @@ def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint | None, *,
     origin = ctx.world.pos(obj)
     lo, hi = boxes.aabb()
     obstacles = ctx.obstacles([] if step is None else [Effect(joint=step.joint, q=step.q_push)], exclude=(obj,))
-    ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+    ext = obstacles.world_extents()
     tops = obstacles.centre[:, 2] + ext[:, 2]
     # the hand puts it down the way it picks it up: its closed hand, shifted with the object, must fit there too
     # (next to the cabinet the hand stopped 19 cm up and the bowl fell)

@@ -15,7 +15,7 @@ import contextlib
 import io
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -95,6 +95,7 @@ class LiberoScene:
     model: mujoco.MjModel
     data: mujoco.MjData
     bddl_path: Path
+    renderers: dict = field(default_factory=dict)  # (width, height) -> mujoco.Renderer, kept with the scene
 
     @classmethod
     def acquire(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
@@ -196,6 +197,10 @@ class LiberoScene:
         return 0.0
 
     def close(self) -> None:
+        for r in self.renderers.values():
+            with contextlib.suppress(Exception):
+                r.close()
+        self.renderers.clear()
         with contextlib.suppress(Exception):
             self.env.close()
 

@@ -309,7 +309,7 @@ class OracleContext:
         """Height of the highest obstacle top within ``radius`` of the segment a->b (xy)."""
         if len(obstacles) == 0:
             return -np.inf
-        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        ext = obstacles.world_extents()
         lo, hi = obstacles.centre - ext, obstacles.centre + ext
         a, b = np.asarray(a_xy[:2], float), np.asarray(b_xy[:2], float)
         ts = np.linspace(0, 1, 25)
@@ -722,7 +722,7 @@ class PickPlace(LiberoSkill):
         """Whether ``body`` moved sideways by PLACE_CLEARANCE_M (either way along x or y) meets a wall:
         a box of ``near`` whose top rises WALL_RISE_M above the body's bottom (low rims do not count)."""
         bottom = body.aabb()[0][2]
-        ext = np.einsum("nij,nj->ni", np.abs(near.rot), near.half)
+        ext = near.world_extents()
         walls = near.select(near.centre[:, 2] + ext[:, 2] > bottom + WALL_RISE_M)
         if not len(walls):
             return False
@@ -741,7 +741,7 @@ class PickPlace(LiberoSkill):
     def _support_z(self, obstacles: Boxes, lo, hi) -> float:
         """Top of the highest obstacle box under the footprint [lo, hi] (xy) whose top is below the
         destination's reference height (a region's top, an object's top)."""
-        ext = np.einsum("nij,nj->ni", np.abs(obstacles.rot), obstacles.half)
+        ext = obstacles.world_extents()
         blo, bhi = obstacles.centre - ext, obstacles.centre + ext
         over = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
         ref = self._reference_top()
@@ -860,10 +860,12 @@ class PickPlace(LiberoSkill):
             start = p["slide"]
         carry_z = p["carry_z"]
         floor = p["carry_floor"]
-        # the lift only has to clear what is near the start (the carry then climbs towards the destination)
+        # the lift only has to clear what is near the start (the carry then climbs towards the destination); a
+        # replan with the object already in the hand lifts no higher than that clearance or where the hand is
+        # (a fixed rise above the hand ratcheted it up by that much at every local replan, out of the camera's view)
         lift = p["lift"] if not p["held"] else ctx.into_view(
             [start[0], start[1], carry_z],
-            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2] + 0.03))
+            max(ctx.clear_z(start, start, obstacles, radius=0.08) + 0.02 + p["obj_below_tcp"], start[2]))
         way_in = p.get("way_in")  # into a cavity: down in front of its opening, then straight in
         above = release if way_in is None else way_in
         over = ctx.into_view([above[0], above[1], carry_z], max(floor, above[2] + 0.03))
@@ -918,7 +920,7 @@ def tilted(cands, base_pos) -> list:
 
 def _near(boxes: Boxes, lo, hi) -> Boxes:
     """The boxes whose xy bounds overlap [lo, hi] (xy)."""
-    ext = np.einsum("nij,nj->ni", np.abs(boxes.rot), boxes.half)
+    ext = boxes.world_extents()
     blo, bhi = boxes.centre - ext, boxes.centre + ext
     keep = (blo[:, 0] < hi[0]) & (bhi[:, 0] > lo[0]) & (blo[:, 1] < hi[1]) & (bhi[:, 1] > lo[1])
     return boxes.select(keep)

@@ -146,7 +146,8 @@ class LiberoTask(Task):
                           support_z=self.scene.support_z(), render_option=render_option(),
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
-                                           int(mujoco.mjtRndFlag.mjRND_REFLECTION)))
+                                           int(mujoco.mjtRndFlag.mjRND_REFLECTION)),
+                          renderers=self.scene.renderers)
 
     def cameras(self) -> tuple[str, ...]:
         return CAMERAS

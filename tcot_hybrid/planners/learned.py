@@ -289,9 +289,10 @@ class NetworkPlanner(Planner):
             self._tokens[instruction] = self.torch.from_numpy(ids)[None]
         return self._tokens[instruction]
 
-    def infer(self, obs: Observation, mode: str, *, waypoints: bool = True) -> dict[str, np.ndarray]:
+    def infer(self, obs: Observation, mode: str, *, waypoints: bool | slice = True) -> dict[str, np.ndarray]:
         """Raw network outputs for ``obs`` in ``mode`` (batch of one), as numpy arrays; ``waypoints=False``
-        leaves out the waypoint decoder (p(success) only)."""
+        leaves out the waypoint decoder (p(success) only), a slice computes only those waypoints
+        (:meth:`PlannerNet.forward`)."""
         from tcot_hybrid.learning.model import MODE_IDS
 
         torch = self.torch
@@ -344,9 +345,12 @@ class LearnedPlanner(NetworkPlanner):
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         if mode not in MODES:
             raise PlanningError(f"learned planner mode {mode!r} is not one of {', '.join(MODES)}")
-        out = self.infer(obs, mode)
         ng = self.cfg.n_global
-        sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, None)
+        sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, self.cfg.n_waypoints)
+        if self.cfg.head == "heatmap":  # only the executed waypoints' maps are computed
+            out, sl = self.infer(obs, mode, waypoints=sl), slice(None)
+        else:
+            out = self.infer(obs, mode)
         uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float) + self.z_ref
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))

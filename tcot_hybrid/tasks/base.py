@@ -94,6 +94,13 @@ class World:
         self.data.qpos[a + 3:a + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
         self.data.qvel[v:v + 6] = 0.0
 
+    def shift(self, name: str, delta) -> None:
+        """Translate a free object by ``delta`` [m, world], orientation kept, at rest."""
+        j = self._jnt[name]
+        a, v = self.model.jnt_qposadr[j], self.model.jnt_dofadr[j]
+        self.data.qpos[a:a + 3] += np.asarray(delta, float)
+        self.data.qvel[v:v + 6] = 0.0
+
     def touching(self, name: str, geoms: frozenset[int]) -> bool:
         obj = self._geoms_of[name]
         d = self.data

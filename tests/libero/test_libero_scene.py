@@ -151,3 +151,32 @@ def test_fixtures_are_placed_the_same_on_every_build_and_shipped_episode(libero_
     task.set_episode(seed=0, init="shipped")
     sim.reset(np.random.default_rng(0))  # ... and a shipped state puts them back where the build placed them
     np.testing.assert_array_equal(sim.model.body_pos, task.scene.built_body_pose[0])
+
+
+def test_the_next_episode_of_a_task_reuses_the_scenes_renderer_and_sees_the_same_image():
+    """A LIBERO renderer takes ~1 s to make (its textures go to the GL context): the scene keeps it for the next
+    episode that reuses the scene, and what it renders is what a fresh renderer renders."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    task = "libero_object:pick_up_the_ketchup_and_place_it_in_the_basket"
+    first = EpisodeRunner(RunConfig(task=task, seed=3, init="sampled"))
+    sim = first.stack.sim
+    sim.render("agentview", 128, 128)
+    renderer = sim.renderer(128, 128)
+    sim.close()
+    second = EpisodeRunner(RunConfig(task=task, seed=4, init="sampled"))
+    sim = second.stack.sim
+    try:
+        assert sim.renderer(128, 128) is renderer
+        reused = sim.render("agentview", 128, 128)
+        fresh = mujoco.Renderer(sim.model, height=128, width=128)
+        try:
+            for flag in sim._scene_flags_off:
+                fresh.scene.flags[flag] = 0
+            fresh.update_scene(sim.data, camera="agentview", scene_option=sim.render_option)
+            np.testing.assert_array_equal(reused, fresh.render())
+        finally:
+            fresh.close()
+    finally:
+        sim.close()
