@@ -113,7 +113,9 @@ libero-oracle-eval: setup
 #  * 10: the shipped 400-demo checkpoint's recipe, two runs (train_libero.yaml, then train_libero_finetune.yaml from
 #    its weights: the first alone was underfit).
 # The last run's checkpoint is copied to tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks
-# on LIBERO tasks; held-out errors go to docs/libero-planner/heldout*.json.
+# on LIBERO tasks; held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
+# on the same file (train_libero_direct.yaml, ~15 min) and copied to libero_panda_direct_default.*, which
+# `--planner direct` picks on LIBERO tasks.
 LIBERO_PLANNER_EPISODES ?= 50
 libero-planner: setup
 	mkdir -p docs/libero-planner runs/libero
@@ -145,15 +147,26 @@ else
 	cp runs/libero/planner50.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner50.json tcot_hybrid/checkpoints/libero_panda_default.json
 endif
+	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
+		|| (tail -5 runs/libero/direct_train.log; exit 1)
+	tr "\r" "\n" < runs/libero/direct_train.log | grep -v "it/s\|s/it\|step/s\|^ *$$" > docs/libero-planner/direct_train.log
+	cp runs/libero/direct.metrics.jsonl docs/libero-planner/direct_train.metrics.jsonl
+	cp runs/libero/direct.safetensors tcot_hybrid/checkpoints/libero_panda_direct_default.safetensors
+	cp runs/libero/direct.json tcot_hybrid/checkpoints/libero_panda_direct_default.json
+	$(BIN)/python docs/libero-planner/direct.py
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --out docs/libero-planner/heldout.json
 	$(BIN)/python docs/libero-planner/summarize.py
 
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md
-# names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR.
+# names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR. Then the direct baseline
+# on sampled development layouts (seeds 20000-20002 of libero_object; docs/libero-planner.md, "Direct baseline").
 libero-planner-eval: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --init shipped --episodes 2 \
 		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped
 	$(BIN)/python docs/libero-planner/summarize.py
+	$(BIN)/tcot eval --suite libero_object --planners direct --init sampled --episodes 3 --seed-start 20000 \
+		--workers 2 --out docs/libero-planner/eval-direct
+	$(BIN)/python docs/libero-planner/direct.py
 
 clean:
 	rm -rf runs .pytest_cache

@@ -224,6 +224,41 @@ def test_direct_planner_one_waypoint_from_tcp(tmp_path, camera):
     assert np.allclose(target - tcp, plan.meta["delta_m"], atol=1e-6)
 
 
+def test_tcp_kinematics_places_the_robot_by_its_mounting_pose():
+    """A robot mounted elsewhere (LIBERO: e.g. (-0.66, 0, 0.912), turned or not) has its TCP moved with its base."""
+    q = np.array([0.1, -0.4, 0.2, -2.2, 0.1, 1.9, 0.6])
+    p0, R0 = TcpKinematics("panda").pose(q)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 degrees about z
+    T[:3, 3] = [-0.66, 0.0, 0.912]
+    p1, R1 = TcpKinematics("panda", T).pose(q)
+    np.testing.assert_allclose(p1, T[:3, :3] @ p0 + T[:3, 3], atol=1e-12)
+    np.testing.assert_allclose(R1, T[:3, :3] @ R0, atol=1e-12)
+    for bad, match in ((np.eye(3), "finite 4x4"), (np.full((4, 4), np.nan), "finite 4x4"),
+                       (np.diag([2.0, 1.0, 1.0, 1.0]), "not a rigid transform")):
+        with pytest.raises(ConfigError, match=match):
+            TcpKinematics("panda", bad)
+
+
+def test_direct_planner_orientation_per_world(tmp_path, camera):
+    """Workcell checkpoints leave the orientation to the executor (top-down, as every workcell demo); a LIBERO one
+    holds the TCP orientation of the episode's first observation in every plan, until ``prepare`` (a new episode)."""
+    path = _save(tmp_path / "d.safetensors", camera, kind="direct")
+    p = DirectPlanner(load_checkpoint(path, kind="direct"), camera, robot_name="panda")
+    assert p.plan(_obs(), mode="direct").tcp_rot is None
+    ck = load_checkpoint(path, kind="direct")
+    ck.meta["world"] = "libero"  # in memory only: what a LIBERO checkpoint's metadata says
+    p = DirectPlanner(ck, camera, robot_name="panda")
+    first = _obs(0)
+    later = _obs(1, q=first.q + 0.2)
+    R_first = p.kinematics.pose(first.q)[1]
+    assert not np.allclose(R_first, p.kinematics.pose(later.q)[1], atol=1e-3)
+    for obs in (first, later):
+        np.testing.assert_allclose(p.plan(obs, mode="direct").tcp_rot, R_first[None], atol=1e-12)
+    p.prepare()
+    np.testing.assert_allclose(p.plan(later, mode="direct").tcp_rot, p.kinematics.pose(later.q)[1][None], atol=1e-12)
+
+
 def test_tcp_kinematics_matches_simulation():
     from tcot_hybrid.config import TimingConfig
     from tcot_hybrid.scene import SceneConfig

@@ -120,7 +120,10 @@ def test_factories_get_the_context_they_are_entitled_to():
         stack = build_stack(RunConfig(task="goal_cube_on_plate", seed=1, planner="spy_observer"))
         ctx = seen["observer"]
         assert type(ctx) is ObservationContext
-        assert {f.name for f in dataclasses.fields(ctx)} == {"camera", "robot_name", "options", "robot", "world_kind"}
+        assert {f.name for f in dataclasses.fields(ctx)} == {"camera", "robot_name", "options", "robot", "world_kind",
+                                                             "T_world_base"}
+        # the robot's mounting pose: a calibration (a copy of a 4x4 transform), not the simulator's arrays
+        assert ctx.T_world_base.shape == (4, 4) and not np.shares_memory(ctx.T_world_base, stack.sim.T_world_base)
         assert type(ctx.robot).__name__ == "RobotSpec"  # the arm's own model (checkpoint matching), not the world
         assert ctx.world_kind == "workcell"  # which world (a string: checkpoints are matched to it), not its state
         assert not hasattr(ctx, "world") and not hasattr(ctx, "task")

@@ -443,6 +443,12 @@ def default_checkpoint(robot: str, kind: str = "trajectory", *, robot_ref: str |
                 f"no shipped trajectory planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
                 f"{', '.join(have) or 'none'}. Build it with `make libero-planner` (LIBERO demonstrations on sampled "
                 f"layouts, then training; docs/libero-planner.md), or pass --checkpoint")
+        if robot == "libero_panda" and kind == "direct":
+            raise CheckpointError(
+                f"no shipped direct planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
+                f"{', '.join(have) or 'none'}. Train one with `tcot train --config examples/configs/"
+                f"train_libero_direct.yaml` on LIBERO demonstrations (docs/libero-planner.md, \"Direct baseline on "
+                f"LIBERO\"), or pass --checkpoint")
         raise CheckpointError(
             f"no shipped {kind} planner checkpoint for robot {robot!r} (looked for {p.name}); shipped: "
             f"{', '.join(have) or 'none'}. Train one with `tcot train --collect --robot {robot_ref or robot} --data "

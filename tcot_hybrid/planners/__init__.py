@@ -27,6 +27,9 @@ class ObservationContext:
     robot:      the run's RobotSpec (its model, as a real robot knows its own): checkpoints are matched to it
                 by model digest, not by name. None when unknown (then the name is compared).
     world_kind: "workcell" or "libero": which world the task is in (checkpoints are refused in another world).
+    T_world_base: the robot's mounting pose in the world (4x4; the base calibration a real robot has, like its
+                camera's): where its own kinematics sit in the frame plans are lifted in. Identity in the
+                workcell; LIBERO mounts the arm at e.g. (-0.66, 0, 0.912). None: the identity.
     At every step the planner then gets an :class:`Observation` (image, proprioception, instruction).
     """
 
@@ -35,6 +38,7 @@ class ObservationContext:
     options: dict[str, Any]
     robot: Any = None
     world_kind: str = "workcell"
+    T_world_base: Any = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,10 +55,14 @@ class PlannerContext:
     options: dict[str, Any]
     robot: Any = None  # the run's RobotSpec: checkpoints are matched to it by model digest, not by name
     world_kind: str = "workcell"  # "workcell" or "libero"
+    T_world_base: Any = None  # the robot's mounting pose (4x4, a calibration; None: identity)
 
     def observation_only(self) -> ObservationContext:
+        import numpy as np
+
+        base = None if self.T_world_base is None else np.array(self.T_world_base, dtype=float)  # a copy
         return ObservationContext(camera=self.camera, robot_name=self.robot_name, options=dict(self.options),
-                                  robot=self.robot, world_kind=self.world_kind)
+                                  robot=self.robot, world_kind=self.world_kind, T_world_base=base)
 
 
 _FACTORIES: dict[str, Callable[[Any], Planner]] = {}

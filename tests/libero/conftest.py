@@ -17,6 +17,21 @@ def libero_runner():
     runner.stack.sim.close()
 
 
+@pytest.fixture(scope="session")
+def libero_demos(tmp_path_factory):
+    """Three oracle demonstrations of SPATIAL_TASK on sampled layouts (training seeds 0-2, every 3rd frame imaged):
+    the tiny data the learned and direct planners' end-to-end tests train on (collected once per session)."""
+    pytest.importorskip("libero.libero")
+    from tcot_hybrid.data.collect import collect
+    from tcot_hybrid.run_config import RunConfig
+
+    data = tmp_path_factory.mktemp("libero_demos") / "demos.hdf5"
+    base = RunConfig(task=SPATIAL_TASK, robot="libero_panda", init="sampled")
+    s = collect(base, tasks=[SPATIAL_TASK], seeds=[0, 1, 2], out=data, workers=1, progress=False, image_every=3)
+    assert s.written == 3 and not s.crashes
+    return data
+
+
 @pytest.fixture
 def spatial_task():
     return SPATIAL_TASK

@@ -9,7 +9,6 @@ import pytest
 
 pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
 
-from tcot_hybrid.data.collect import collect  # noqa: E402
 from tcot_hybrid.data.dataset import open_demos  # noqa: E402
 from tcot_hybrid.episode import EpisodeRunner  # noqa: E402
 from tcot_hybrid.errors import CheckpointError  # noqa: E402
@@ -23,12 +22,9 @@ SPATIAL_TASK = "libero_spatial:pick_up_the_black_bowl_between_the_plate_and_the_
 
 
 @pytest.fixture(scope="module")
-def tiny_checkpoint(tmp_path_factory):
+def tiny_checkpoint(tmp_path_factory, libero_demos):
     d = tmp_path_factory.mktemp("libero_planner")
-    data = d / "demos.hdf5"
-    base = RunConfig(task=SPATIAL_TASK, robot="libero_panda", init="sampled")
-    s = collect(base, tasks=[SPATIAL_TASK], seeds=[0, 1, 2], out=data, workers=1, progress=False, image_every=3)
-    assert s.written == 3 and not s.crashes
+    data = libero_demos  # conftest: three oracle demonstrations on sampled layouts (training seeds 0-2)
     cfg = TrainConfig(data=str(data), out=str(d / "tiny.safetensors"), height_ref="camera", threads=1,
                       model=ModelConfig(width=8, rot_head=True, z_offset_m=-0.5),
                       windows=dataclasses.replace(TrainConfig().windows, global_spacing="events"),
