@@ -144,7 +144,7 @@ def heldout_lines() -> list[str]:
 
 
 EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shipped-400"),
-         ("shipped checkpoint", "eval-shipped"))
+         ("stage 2 on part of the online data, not shipped", "eval-stage2"), ("shipped checkpoint", "eval-shipped"))
 
 
 def _episodes(name: str) -> list[dict]:
