@@ -44,48 +44,30 @@ def reworded(ck, frames, traj: np.ndarray, uv_true: np.ndarray, grip_true: np.nd
     word order changed, objects' names kept): first-grasp and whole-plan pixel errors beside the original wording's,
     and the rewordings the planner would refuse (more unknown words than the checkpoint's ``max_unknown_fraction``;
     measured anyway, with the unknown words as <unk>)."""
-    import torch
-
-    from tcot_hybrid.errors import PlanningError
-    from tcot_hybrid.learning.evaluate import PARAPHRASES
+    from tcot_hybrid.learning.evaluate import reworded_instructions
     from tcot_hybrid.learning.validation import predict
     from tcot_hybrid.learning.vocab import Vocabulary
 
-    vocab = Vocabulary(tuple(ck.meta["vocabulary"]))
-    max_unknown = float(ck.meta.get("max_unknown_fraction", 0.5))
     ng = ck.model.cfg.n_global
     t0 = frames.t[traj] == 0
     rows = traj[t0]
-    saved = frames.tokens.clone()
-    missing, refused, unknown = [], [], []
-    out = {}
-    try:
-        for label in ("original", "reworded"):
-            if label == "reworded":
-                for di, instr in enumerate(frames.instructions):
-                    para = PARAPHRASES.get(instr)
-                    if para is None:
-                        missing.append(instr)
-                        continue
-                    ids, n_words, n_unknown = vocab.encode(para, ck.model.cfg.max_tokens)
-                    unknown.append(n_unknown / max(n_words, 1))
-                    try:
-                        vocab.encode_checked(para, ck.model.cfg.max_tokens, max_unknown_fraction=max_unknown)
-                    except PlanningError:
-                        refused.append(para)
-                    frames.tokens[frames.demo == di] = torch.from_numpy(ids)
-            g = predict(ck.model, frames, rows, "global")
-            uv = g["uv_px"][:, center:ng]
-            px = np.linalg.norm(uv - uv_true[t0], axis=-1)
-            grasp = first_grasp_errors(uv, uv_true[t0], grip_true[t0])
-            grasp = grasp[np.isfinite(grasp)]
-            out[label] = {"t0_px_median": round(float(np.median(px)), 2),
-                          "t0_first_grasp_px_median": round(float(np.median(grasp)), 2),
-                          "t0_first_grasp_within_5px": round(float((grasp < 5).mean()), 3)}
-    finally:
-        frames.tokens.copy_(saved)
-    return {**out, "instructions": len(set(frames.instructions)), "without_rewording": sorted(set(missing)),
-            "refused": sorted(set(refused)), "unknown_word_fraction_median": round(float(np.median(unknown)), 3),
+
+    def errors() -> dict:
+        uv = predict(ck.model, frames, rows, "global")["uv_px"][:, center:ng]
+        px = np.linalg.norm(uv - uv_true[t0], axis=-1)
+        grasp = first_grasp_errors(uv, uv_true[t0], grip_true[t0])
+        grasp = grasp[np.isfinite(grasp)]
+        return {"t0_px_median": round(float(np.median(px)), 2),
+                "t0_first_grasp_px_median": round(float(np.median(grasp)), 2),
+                "t0_first_grasp_within_5px": round(float((grasp < 5).mean()), 3)}
+
+    original = errors()
+    with reworded_instructions(frames, Vocabulary(tuple(ck.meta["vocabulary"])), max_tokens=ck.model.cfg.max_tokens,
+                               max_unknown_fraction=float(ck.meta.get("max_unknown_fraction", 0.5))) as r:
+        changed = errors()
+    return {"original": original, "reworded": changed, "instructions": len(set(frames.instructions)),
+            "without_rewording": sorted(set(r.missing)), "refused": sorted(set(r.refused)),
+            "unknown_word_fraction_median": round(float(np.median(r.unknown_fractions)), 3),
             "t0_plans": int(t0.sum())}
 
 

@@ -9,8 +9,10 @@ writes ``planner_eval.json`` and ``planner_eval.md`` into the output directory.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -196,33 +198,56 @@ def t0_stop_errors(ck, frames, camera) -> dict:
             "per_task_within_1_5cm": {k: round(float(np.mean(np.array(v) <= 0.015)), 3) for k, v in sorted(per_task.items())}}
 
 
-def paraphrase_robustness(ck, frames, camera, vocab) -> dict:
-    """Global-plan error at t = 0 with each task's instruction replaced by an unseen rewording."""
+@dataclass
+class Rewording:
+    """What :func:`reworded_instructions` swapped in: instruction -> rewording, the instructions without one, the
+    rewordings the planner would refuse (too many unknown words) and each rewording's unknown-word fraction."""
+
+    pairs: dict[str, str] = field(default_factory=dict)
+    missing: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
+    unknown_fractions: list[float] = field(default_factory=list)
+
+
+@contextlib.contextmanager
+def reworded_instructions(frames, vocab, *, max_tokens: int, max_unknown_fraction: float):
+    """Inside the block every demo of ``frames`` reads its instruction's rewording (``PARAPHRASES``) as tokens;
+    a rewording the planner would refuse is measured anyway (unknown words as <unk>). The original tokens are
+    restored afterwards. Yields a :class:`Rewording`."""
     import torch
 
-    from tcot_hybrid.learning.validation import predict
-
-    max_unknown = float(ck.meta.get("max_unknown_fraction", 0.5))
-    ng, center = ck.model.cfg.n_global, int(ck.meta["windows"]["L_g"]) // 2
-    idx = np.flatnonzero(frames.t == 0)
-    base = predict(ck.model, frames, idx, "global")
     saved = frames.tokens.clone()
-    refused, rows = [], {}
+    r = Rewording()
     try:
         for di, instr in enumerate(frames.instructions):
             para = PARAPHRASES.get(instr)
             if para is None:
+                r.missing.append(instr)
                 continue
+            ids, n_words, n_unknown = vocab.encode(para, max_tokens)
+            r.unknown_fractions.append(n_unknown / max(n_words, 1))
             try:
-                ids = vocab.encode_checked(para, ck.model.cfg.max_tokens, max_unknown_fraction=max_unknown)
+                vocab.encode_checked(para, max_tokens, max_unknown_fraction=max_unknown_fraction)
             except PlanningError:
-                refused.append(para)
-                ids = vocab.encode(para, ck.model.cfg.max_tokens)[0]
+                r.refused.append(para)
             frames.tokens[frames.demo == di] = torch.from_numpy(ids)
-            rows[instr] = para
-        para_out = predict(ck.model, frames, idx, "global")
+            r.pairs[instr] = para
+        yield r
     finally:
         frames.tokens.copy_(saved)
+
+
+def paraphrase_robustness(ck, frames, camera, vocab) -> dict:
+    """Global-plan error at t = 0 with each task's instruction replaced by an unseen rewording."""
+    from tcot_hybrid.learning.validation import predict
+
+    ng, center = ck.model.cfg.n_global, int(ck.meta["windows"]["L_g"]) // 2
+    idx = np.flatnonzero(frames.t == 0)
+    base = predict(ck.model, frames, idx, "global")
+    with reworded_instructions(frames, vocab, max_tokens=ck.model.cfg.max_tokens,
+                               max_unknown_fraction=float(ck.meta.get("max_unknown_fraction", 0.5))) as r:
+        para_out = predict(ck.model, frames, idx, "global")
+    rows, refused = r.pairs, r.refused
     xyz = frames.g_xyz[idx][:, center:].numpy()
     e_base = np.linalg.norm(points_at_height(camera, base["uv_px"][:, center:ng], base["z_m"][:, center:ng]) - xyz, axis=-1)
     e_para = np.linalg.norm(points_at_height(camera, para_out["uv_px"][:, center:ng], para_out["z_m"][:, center:ng]) - xyz,
