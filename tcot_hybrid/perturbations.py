@@ -240,11 +240,7 @@ class OffCentreGrasp(Perturbation):
         if not isinstance(skill, LiberoPickPlace) or skill.obj not in world.objects or not world.fingers_open() \
                 or world.touching(skill.obj, world.finger_geoms):
             return None
-        from tcot_hybrid.libero.geometry import collision_boxes, subtree_bodies
-
-        boxes = collision_boxes(world.model, world.data, subtree_bodies(world.model, world.model.body(
-            world.objects[skill.obj].body).id))
-        lo, hi = boxes.aabb()
+        lo, hi = skill.ctx.object_boxes(skill.obj, []).aabb()
         if not np.all((world.tcp_pos() >= lo - GRASP_REACH_M) & (world.tcp_pos() <= hi + GRASP_REACH_M)):
             return None
         closing = world.tcp_rot()[:, 0] * np.array([1.0, 1.0, 0.0])

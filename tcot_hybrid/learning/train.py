@@ -158,7 +158,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
                  if online_split_size(path, "valid") else None)
         log(f"online data {path}: {len(on_tr.demos)} train episodes / {len(on_tr)} frames "
             f"({int(on_tr.traj.sum())} with recovery trajectories, {int(on_tr.success.sum())} success), "
-            + (f"{len(on_va.demos)} valid episodes / {len(on_va)} frames" if on_va is not None else "no valid episodes"))
+            + (f"{len(on_va.demos)} valid episodes / {len(on_va)} frames" if on_va is not None
+               else "no valid episodes"))
         if on_va is not None:
             vas.append(on_va)
     tr, va = concat_frames(trs), concat_frames(vas)

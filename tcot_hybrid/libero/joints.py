@@ -205,7 +205,8 @@ def carry_on_closed(kfs: list[Keyframe], world: World) -> list[Keyframe]:
     end = next((i for i in range(first, len(kfs)) if not kfs[i].closed), len(kfs))
     tcp = world.tcp_pos()
     # distance to each piece (keyframe i to i + 1) of the stretch; a one-keyframe stretch is its point
-    dist = [segment_distance(tcp, kfs[i].pos, kfs[min(i + 1, end - 1)].pos) for i in range(first, max(first + 1, end - 1))]
+    dist = [segment_distance(tcp, kfs[i].pos, kfs[min(i + 1, end - 1)].pos)
+            for i in range(first, max(first + 1, end - 1))]
     nearest = int(np.argmin(dist))
     return kfs[first + nearest:] if dist[nearest] <= RESUME_CLOSED_M else kfs
 
