@@ -132,7 +132,18 @@ def coerce_field(path: str, tp: Any, value: Any) -> Any:
         if value is None and type(None) in args:
             return None
         inner = [a for a in args if a is not type(None)]
-        return coerce_field(path, inner[0], value)
+        errors = []
+        for a in inner:  # e.g. int | Literal["auto", "plan"]: the first type the value is
+            try:
+                return coerce_field(path, a, value)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError("; or ".join(errors))
+    if origin is typing.Literal:
+        choices = typing.get_args(tp)
+        if isinstance(value, bool) or value not in choices:
+            raise ConfigError(f"{path} = {short_repr(value)} is not valid; choose one of {', '.join(map(str, choices))}")
+        return value
     if origin is dict:
         if not isinstance(value, dict):
             raise ConfigError(f"{path} must be a mapping, got {short_repr(value)}")

@@ -217,6 +217,8 @@ class EpisodeRunner:
                 if "p_success" in d.event:  # ground truth beside the detector's call, for its metrics
                     d.event["true_success"] = bool(s.task.success(s.sim.world))
                 ex.event(**d.event)
+                if d.event.get("reason") == "grasp_empty":  # the gripper was opened: observe the open hand
+                    self.invalidate_observation()
                 if d.event.get("reason") == "detector_overruled":  # the planner says there is work left: a
                     self._stop_hold = 0  # detector stop (stop_on detector/either) counts its verdicts afresh
             if d.reset:
@@ -263,11 +265,12 @@ class EpisodeRunner:
         return self.perturbation.cannot_apply(self.stack.task, self.stack.planner, self.max_steps - 1)
 
     def _detector_stop(self, step: int) -> bool:
-        """stop_on = detector: ask the failure detector on the observation at ``step`` (from supervisor.t_f on);
+        """stop_on = detector: ask the failure detector on the observation at ``step`` (once the supervisor's frozen
+        global phase is over: supervisor.t_f);
         True once it has judged the task successful on ``stop_hold_steps`` consecutive calls. The predicate is
         logged beside each call (``true_success``) for the detector's figures, never used to stop."""
         s, cfg = self.stack, self.cfg
-        if step < cfg.supervisor.t_f:
+        if self.supervisor.in_global_phase(step, s.executor):
             return False
         p, rejected = self.supervisor.detect(lambda: self.observe(step))
         ok = rejected is None and p >= cfg.supervisor.success_threshold
@@ -363,7 +366,7 @@ class EpisodeRunner:
             "stop_on": self.stop_on, "stopped_by": self.stopped_by,
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
-            "detector_overruled": self.supervisor.overruled,
+            "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),
             "max_velocity_ratio": float(ex.max_velocity_ratio),

@@ -331,6 +331,12 @@ class MotionExecutor:
         self.controller.reset(self.dyn, self._last_tau)
         self.event("reference_resynced", reason=reason)
 
+    def open_empty_gripper(self, opening_m: float) -> None:
+        """The closed gripper holds nothing (its fingers met): open it, so the next plan starts from an open hand."""
+        self.sim.set_gripper(False)
+        self.event("gripper", closed=False, reason="grasp_empty", opening_m=round(opening_m, 5))
+        self.phase = "done"  # the plan's remaining stops assumed an object in the hand; a new plan follows
+
     @property
     def plan_finished(self) -> bool:
         return self.phase in ("done", "idle")

@@ -165,6 +165,10 @@ class Simulation:
     def gripper_closed_cmd(self) -> bool:
         return bool(self.data.ctrl[self.gripper_act] == self.robot.gripper_closed)
 
+    def gripper_opening_m(self) -> float:
+        """Measured finger opening: the finger joints' travel from closed, summed [m] (proprioception)."""
+        return float(np.abs(self.data.qpos[self.gripper_qpos]).sum())
+
     # --- rendering --------------------------------------------------------------------------------
     def renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)

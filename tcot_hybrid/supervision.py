@@ -5,13 +5,23 @@ Modes
 - ``global``: one global plan at the first step, followed frozen (paper: global trajectory only).
 - ``local``: a local plan every ``t_l`` steps from the first step (paper: local trajectory only).
 - ``glsr``: Algorithm 1. Global plan at the first step, followed frozen until ``t_f`` (or until the executor
-  has carried it out, if that comes first: a finished plan has nothing left to follow); from then on
+  has carried it out, if that comes first: a finished plan has nothing left to follow; ``t_f`` = "plan": until
+  then, however long it takes); from then on
   failure detection every step; when ``t mod t_l == 0`` and the task is not judged successful, a local
   plan from the current image, which the motion stack retargets to smoothly.
 - ``glsr_reset``: the paper's released-code variant: on the first detected failure after ``t_f`` the
   scene is reset to its initial state and the task is retried with local plans.
 A planner with ``replan_every_step`` (the direct-action baseline) is asked every step whatever the mode.
 Every decision is returned as an event (step, state, success probability, replan reason).
+
+An empty grasp (``empty_grasp``): the gripper was closed and its fingers met (opening below ``empty_grasp_m`` for
+``empty_grasp_steps`` planner steps: the object was missed, moved away or dropped). The gripper opens and a local
+plan from the open hand follows at once, reason ``grasp_empty``, also inside the frozen global phase: the network's
+proprioception is the gripper command, and with the gripper still closed its local plans carry the missing object
+on. Only once the hand has lifted ``empty_grasp_lift_m`` above where it closed: plans close an empty hand on purpose
+too (a knob turned, a drawer or door pushed with closed fingers: the LIBERO Panda's fingers then measure as little
+as on nothing), and those motions keep low. Non-privileged: the finger joints' measured positions and the TCP
+height from the arm's own kinematics.
 
 A detector that calls an unfinished task done leaves Algorithm 1 following a finished plan until the time limit
 (LIBERO, a detector trained on demonstrations only: docs/libero-planner.md, "Failure analysis"). With
@@ -23,12 +33,15 @@ network's two outputs on the same observation, nothing from the simulator.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
 CONFIRM_SUCCESS = ("auto", "off", "local_plan")
+EMPTY_GRASP = ("auto", "on", "off")
+T_F_WORDS = ("auto", "plan")
+T_F_WORKCELL = 16  # steps: docs/glsr.md, "Choosing t_f"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,8 +52,11 @@ class SupervisorConfig:
     t_f:               latest step at which the frozen global phase ends and failure detection starts; it
                        ends earlier when the executor has carried the whole global plan out. Up: fewer
                        needless replans of a slow but working plan; down: earlier recovery from a plan that
-                       is still running but already wrong (e.g. the object moved under it). Default 16
-                       (1.6 s) by measurement: docs/glsr.md, "Choosing t_f".
+                       is still running but already wrong (e.g. the object moved under it). "plan": no step
+                       limit, the phase ends when the global plan has been carried out. "auto" (default), by
+                       measurement: 16 steps (1.6 s) on the workcell (docs/glsr.md, "Choosing t_f"), "plan" on
+                       LIBERO, whose local prompt derails global plans that were working (docs/libero-planner.md,
+                       "Choosing t_f on LIBERO").
     t_l:               local planning period [steps]. Down: reacts faster, more planner calls.
     success_threshold: p(success) at or above which the task is judged done (no replan). Up: replans
                        more readily (fewer missed failures, more false alarms).
@@ -55,6 +71,18 @@ class SupervisorConfig:
                        "auto": local_plan on LIBERO (its detector saw no rollouts and called unfinished tasks done on
                        nearly every step: docs/libero-planner.md), off on the workcell (its reporting tables were
                        measured without it).
+    empty_grasp:       glsr modes: "on" (reopen a gripper that closed on nothing and replan locally, see the module doc),
+                       "off", or "auto": on for LIBERO (docs/libero-planner.md, "Empty grasps"), off on the workcell
+                       (its reporting tables were measured without it).
+    empty_grasp_m:     finger opening [m, both fingers' travel] below which a closed gripper holds nothing. The
+                       LIBERO Panda's fingers stop at 1.2 mm closing on nothing and at 3.8 mm or more on the thinnest
+                       object grasped (a bowl's rim; docs/libero-planner.md). Up: thin objects count as missed; down:
+                       a missed grasp may go unnoticed.
+    empty_grasp_steps: consecutive planner steps the opening must stay below ``empty_grasp_m`` (fingers take
+                       about 0.2 s to close).
+    empty_grasp_lift_m: how far above the point where it closed the hand must be for an empty gripper to count as
+                       a missed or lost object [m]. Down: reacts sooner after a miss, but may reopen a closed hand
+                       that turns a knob or pushes a door; up: later.
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
                        do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
                        on success frames and on the others). Up: overrules fewer verdicts (more false successes
@@ -63,7 +91,7 @@ class SupervisorConfig:
     """
 
     mode: str = "global"
-    t_f: int = 16
+    t_f: int | Literal["auto", "plan"] = "auto"
     t_l: int = 8
     success_threshold: float = 0.5
     geometric_checks: bool = False
@@ -71,12 +99,23 @@ class SupervisorConfig:
     max_plan_latency_s: float | None = 1.0
     confirm_success: str = "auto"
     confirm_motion_m: float = 0.05
+    empty_grasp: str = "auto"
+    empty_grasp_m: float = 0.0025
+    empty_grasp_steps: int = 3
+    empty_grasp_lift_m: float = 0.04
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
         require_choice("supervisor.confirm_success", self.confirm_success, CONFIRM_SUCCESS)
         require_positive("supervisor.confirm_motion_m", self.confirm_motion_m)
-        require_int("supervisor.t_f", self.t_f, minimum=0)
+        require_choice("supervisor.empty_grasp", self.empty_grasp, EMPTY_GRASP)
+        require_positive("supervisor.empty_grasp_m", self.empty_grasp_m)
+        require_int("supervisor.empty_grasp_steps", self.empty_grasp_steps, minimum=1)
+        require_positive("supervisor.empty_grasp_lift_m", self.empty_grasp_lift_m)
+        if isinstance(self.t_f, str):
+            require_choice("supervisor.t_f", self.t_f, T_F_WORDS)
+        else:
+            require_int("supervisor.t_f", self.t_f, minimum=0)
         require_int("supervisor.t_l", self.t_l, minimum=1)
         require_positive("supervisor.success_threshold", self.success_threshold)
         if not 0.0 < self.success_threshold <= 1.0:
@@ -86,6 +125,13 @@ class SupervisorConfig:
         require_int("supervisor.max_resets", self.max_resets, minimum=0)
         if self.max_plan_latency_s is not None:
             require_positive("supervisor.max_plan_latency_s", self.max_plan_latency_s)
+
+
+def resolve_t_f(t_f: int | str, world_kind: str) -> int | None:
+    """``supervisor.t_f`` as a step (int), or None for "until the global plan has been carried out"."""
+    if t_f == "auto":
+        return None if world_kind == "libero" else T_F_WORKCELL
+    return None if t_f == "plan" else t_f
 
 
 class Decision(NamedTuple):
@@ -102,7 +148,12 @@ class Supervisor:
         self.cfg, self.planner = config, planner
         self.confirm = config.confirm_success == "local_plan" or (config.confirm_success == "auto"
                                                                   and world_kind == "libero")
+        self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
+        self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
+        self._closed_at_z = None  # TCP height where the gripper was closed [m]
+        self.empty_grasps = 0
         self.overruled = 0
+        self.t_f = resolve_t_f(config.t_f, world_kind)  # None: the global phase lasts as long as its plan
         self.state = "start"
         self.resets = 0
         self.replans = 0
@@ -134,8 +185,16 @@ class Supervisor:
             if step % cfg.t_l == 0:
                 return self._plan(step, "local", "period", executor)
             return Decision(None, False, None)
+        if self.check_empty_grasp and self._grasp_is_empty(executor):  # before any observation of this step
+            opening = executor.sim.gripper_opening_m()
+            executor.open_empty_gripper(opening)
+            self.empty_grasps += 1
+            self.state = "local_follow"
+            d = self._plan(step, "local", "grasp_empty", executor)
+            return Decision(d.plan_mode, False, {**d.event, "opening_m": round(opening, 5)})
         geometric = self._geometric_reason(executor) if cfg.geometric_checks else None
-        frozen = self.state == "global_follow" and step <= cfg.t_f and not executor.plan_finished
+        frozen = (self.state == "global_follow" and (self.t_f is None or step <= self.t_f)
+                  and not executor.plan_finished)
         if frozen and geometric is None:
             return Decision(None, False, None)
         p, rejected = self.detect(observe)
@@ -162,6 +221,13 @@ class Supervisor:
             d = self._plan(step, "local", reason, executor)
             return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
         return Decision(None, False, self._event(step, p=p))
+
+    def in_global_phase(self, step: int, executor) -> bool:
+        """Before failure detection starts (``--stop-on detector`` asks from then on): step < t_f, or with t_f "plan"
+        while the first global plan is still being carried out (a local-only run has no global phase)."""
+        if self.t_f is not None:
+            return step < self.t_f
+        return self.state == "global_follow" and not executor.plan_finished
 
     def detect(self, observe) -> tuple[float, str | None]:
         """The detector's p(success) on ``observe()`` and why it was rejected (None if usable); an unusable
@@ -213,6 +279,24 @@ class Supervisor:
         if motion > self.cfg.confirm_motion_m or bool((grip != grip[0]).any()):
             return plan, motion
         return None, motion
+
+    def _grasp_is_empty(self, executor) -> bool:
+        """True once the closed gripper has measured empty for ``empty_grasp_steps`` steps while the hand is at least
+        ``empty_grasp_lift_m`` above where it closed: a pick lifts what it holds, while a knob turned or a drawer or
+        door pushed with closed fingers (an empty hand on purpose) keeps low."""
+        sim = executor.sim
+        closed = sim.gripper_closed_cmd()
+        if closed and self._closed_at_z is None:
+            self._closed_at_z = float(sim.tcp_pos()[2])
+        elif not closed:
+            self._closed_at_z = None
+        empty = (closed and sim.gripper_opening_m() < self.cfg.empty_grasp_m
+                 and float(sim.tcp_pos()[2]) - self._closed_at_z >= self.cfg.empty_grasp_lift_m)
+        self._empty_steps = self._empty_steps + 1 if empty else 0
+        if self._empty_steps < self.cfg.empty_grasp_steps:
+            return False
+        self._empty_steps = 0
+        return True
 
     def _geometric_reason(self, executor) -> str | None:
         if getattr(executor, "plans_infeasible", 0) > self._infeasible_at_plan:

@@ -3,6 +3,7 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import numpy as np
 import pytest
 
 from tcot_hybrid.episode import EpisodeRunner
@@ -63,6 +64,36 @@ def test_frozen_phase_ends_when_the_global_plan_has_been_carried_out():
     assert [t for t, d in enumerate(ds) if d.plan_mode] == [0, 8, 12]
 
 
+@pytest.mark.parametrize("t_f, world, first_detection", [("plan", "workcell", 30), ("auto", "libero", 30),
+                                                        ("auto", "workcell", 17), (8, "libero", 9)])
+def test_t_f_plan_keeps_the_global_phase_until_the_plan_is_carried_out(t_f, world, first_detection):
+    """A step t_f freezes the global plan through step t_f; "plan" (LIBERO's "auto") until it has been carried out."""
+    class DoneAfter30(FakeExecutor):
+        t = 0
+
+        @property
+        def plan_finished(self):
+            return self.t >= 30
+
+    cfg = SupervisorConfig(mode="glsr", t_f=t_f, t_l=4, empty_grasp="off")
+    sup, ex = Supervisor(cfg, FakePlanner(0.1), world_kind=world), DoneAfter30()
+    first_detect = None
+    for t in range(40):
+        ex.t = t
+        in_phase = sup.in_global_phase(t, ex)
+        d = sup.decide(t, observe=lambda: None, executor=ex)
+        if first_detect is None and d.event and "p_success" in d.event:
+            first_detect = t
+            assert not in_phase  # --stop-on detector's checks have started by then too
+    assert first_detect == first_detection
+
+
+def test_t_f_local_mode_has_no_global_phase():
+    sup = Supervisor(SupervisorConfig(mode="local", t_f="plan"), FakePlanner(0.1))
+    sup.decide(0, observe=lambda: None, executor=FakeExecutor())
+    assert not sup.in_global_phase(1, FakeExecutor())
+
+
 def test_no_replan_while_judged_successful():
     ds = decisions(SupervisorConfig(mode="glsr", t_f=3, t_l=2), 0.9, 12)
     assert [t for t, d in enumerate(ds) if d.plan_mode] == [0]
@@ -82,10 +113,13 @@ def test_reset_variant_resets_once_then_plans_locally():
     assert [t for t, d in enumerate(ds) if d.plan_mode == "local"] == [6, 8, 10]
 
 
-@pytest.mark.parametrize("kw", [dict(mode="sometimes"), dict(t_l=0), dict(t_f=-1), dict(success_threshold=1.5)])
+@pytest.mark.parametrize("kw", [dict(mode="sometimes"), dict(t_l=0), dict(t_f=-1), dict(success_threshold=1.5),
+                                dict(t_f="whenever"), dict(t_f=2.5)])
 def test_bad_supervisor_config(kw):
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError) as e:
         SupervisorConfig(**kw)
+    if kw.get("t_f") == "whenever":
+        assert "'whenever'" in str(e.value) and "auto, plan" in str(e.value)
 
 
 def test_glsr_recovers_where_frozen_global_plan_fails():
@@ -152,6 +186,10 @@ class SaysDonePlanner(FakePlanner):
 class CameraExecutor(FakeExecutor):
     camera = StraightCamera()
 
+    def __init__(self):
+        self.sim = GripperSim([0.08])  # an open hand (LIBERO's empty-grasp check reads it)
+        self.sim.closed = False
+
 
 def confirm_decisions(cfg, planner, steps, world_kind="libero"):
     sup = Supervisor(cfg, planner, world_kind=world_kind)
@@ -189,3 +227,103 @@ def test_confirm_success_auto_is_on_for_libero_only_and_off_is_algorithm1():
         SupervisorConfig(confirm_success="sometimes")
     with pytest.raises(ConfigError, match="confirm_motion_m"):
         SupervisorConfig(confirm_motion_m=0.0)
+
+
+@pytest.mark.parametrize("value, expect", [("plan", "plan"), ("auto", "auto"), (12, 12), ("whenever", None),
+                                           (True, None), (2.5, None)])
+def test_t_f_from_a_config_file(value, expect):
+    from tcot_hybrid.run_config import from_mapping
+
+    if expect is None:
+        with pytest.raises(ConfigError) as e:
+            from_mapping(RunConfig, {"task": "goal_cube_on_plate", "supervisor": {"t_f": value}})
+        assert "supervisor.t_f" in str(e.value) and "auto, plan" in str(e.value)
+    else:
+        cfg = from_mapping(RunConfig, {"task": "goal_cube_on_plate", "supervisor": {"t_f": value}})
+        assert cfg.supervisor.t_f == expect
+
+
+class GripperSim:
+    def __init__(self, openings, heights=(0.0, 0.1)):
+        self.openings, self.heights, self.t, self.closed = openings, heights, 0, True
+
+    def tcp_pos(self):  # [m]; the hand closes at the first height and lifts to the second from step 2 on
+        return np.array([0.0, 0.0, self.heights[0] if self.t < 2 else self.heights[1]])
+
+    def gripper_closed_cmd(self):
+        return self.closed
+
+    def gripper_opening_m(self):
+        return self.openings[min(self.t, len(self.openings) - 1)]
+
+
+class GripperExecutor(FakeExecutor):
+    def __init__(self, openings):
+        self.sim, self.opened = GripperSim(openings), []
+
+    def open_empty_gripper(self, opening_m):
+        self.sim.closed = False
+        self.opened.append(opening_m)
+
+
+@pytest.mark.parametrize("world, setting, fires", [("libero", "auto", True), ("workcell", "auto", False),
+                                                   ("workcell", "on", True), ("libero", "off", False)])
+def test_an_empty_grasp_reopens_the_gripper_and_replans_locally_at_once(world, setting, fires):
+    """Fingers that met (opening below empty_grasp_m for empty_grasp_steps steps) inside the frozen global phase:
+    the gripper opens and a local plan follows, before the detector is asked (the hand is observed open)."""
+    cfg = SupervisorConfig(mode="glsr", t_f="plan", empty_grasp=setting, empty_grasp_m=0.0025, empty_grasp_steps=3,
+                           confirm_success="off")
+    # closing: 40 mm, 10 mm, then 1.2 mm from step 3 on (nothing between the fingers)
+    ex = GripperExecutor([0.04, 0.01, 0.01, 0.0012])
+    sup = Supervisor(cfg, FakePlanner(0.1), world_kind=world)
+    ds = []
+    for t in range(10):
+        ex.sim.t = t
+        ds.append(sup.decide(t, observe=lambda: None, executor=ex))
+    planned = [(t, d.plan_mode, d.event["reason"]) for t, d in enumerate(ds) if d.plan_mode]
+    if fires:
+        # steps 3, 4, 5 below 2.5 mm; then Algorithm 1 goes on from the local phase (t_l = 8)
+        assert planned == [(0, "global", "start"), (5, "local", "grasp_empty"), (8, "local", "not_successful")]
+        assert ex.opened == [0.0012] and ds[5].event["opening_m"] == 0.0012 and sup.empty_grasps == 1
+        assert sup.state == "local_follow"
+    else:
+        assert planned == [(0, "global", "start")] and ex.opened == [] and sup.empty_grasps == 0
+
+
+def test_a_held_object_is_not_an_empty_grasp():
+    ex = GripperExecutor([0.04, 0.01, 0.0038])  # a bowl's rim between the fingers
+    sup = Supervisor(SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on"), FakePlanner(0.1))
+    for t in range(20):
+        ex.sim.t = t
+        d = sup.decide(t, observe=lambda: None, executor=ex)
+        assert t == 0 or d.plan_mode is None
+    assert ex.opened == []
+
+
+@pytest.mark.parametrize("kw", [dict(empty_grasp="maybe"), dict(empty_grasp_m=0.0), dict(empty_grasp_steps=0)])
+def test_bad_empty_grasp_settings(kw):
+    with pytest.raises(ConfigError) as e:
+        SupervisorConfig(**kw)
+    assert "supervisor.empty_grasp" in str(e.value)
+
+
+def test_an_empty_hand_that_keeps_low_is_left_alone_and_a_lost_object_is_noticed_once_lifted():
+    """Closed fingers that measure empty while the hand stays where it closed (a knob turned, a door pushed) are left
+    alone; once the hand is empty_grasp_lift_m above that point (a miss lifted, an object dropped in transport), the
+    gripper reopens."""
+    def reopenings(heights, openings=(0.0012,), steps=12):
+        ex = GripperExecutor(list(openings))
+        ex.sim.heights = heights
+        sup = Supervisor(SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on", confirm_success="off",
+                                          empty_grasp_lift_m=0.04), FakePlanner(0.1))
+        out = []
+        for t in range(steps):
+            ex.sim.t = t
+            d = sup.decide(t, observe=lambda: None, executor=ex)
+            if d.event and d.event.get("reason") == "grasp_empty":
+                out.append(t)
+        return out
+
+    assert reopenings((0.90, 0.91)) == []  # 1 cm up: a push or a turn
+    assert reopenings((0.90, 0.95)) == [4]  # lifted 5 cm from step 2: steps 2, 3, 4
+    assert reopenings((0.90, 0.95), openings=(0.004,)) == []  # lifted, holding 4 mm: a held object
