@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval clean
+.PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval libero-planner-perturb clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -160,13 +160,23 @@ endif
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md
 # names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR. Then the direct baseline
 # on sampled development layouts (seeds 20000-20002 of libero_object; docs/libero-planner.md, "Direct baseline").
+# GLSR with the current supervisor defaults in its own folder: eval-shipped's GLSR rows were measured with t_f = 16
 libero-planner-eval: setup
-	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --init shipped --episodes 2 \
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global --init shipped --episodes 2 \
 		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes glsr --init shipped --episodes 2 \
+		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped-glsr
 	$(BIN)/python docs/libero-planner/summarize.py
 	$(BIN)/tcot eval --suite libero_object --planners direct --init sampled --episodes 3 --seed-start 20000 \
 		--workers 2 --out docs/libero-planner/eval-direct
 	$(BIN)/python docs/libero-planner/direct.py
+
+# every perturbation family on sampled reporting layouts (docs/seeds.md: 90000+), GLSR against global-only
+LIBERO_PERTURBS := object_moved,target_moved,object_drop,offcenter_grasp,arm_push,camera_noise,camera_shift,init_posture
+libero-planner-perturb: setup
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --perturb $(LIBERO_PERTURBS) \
+		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb
+	$(BIN)/python docs/libero-planner/summarize.py
 
 clean:
 	rm -rf runs .pytest_cache

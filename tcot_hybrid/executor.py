@@ -162,6 +162,7 @@ class MotionExecutor:
         self._plan_q: np.ndarray | None = None  # joint targets of the current plan from a whole-plan solve
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
+        self.grasp_tcp_z: float | None = None  # TCP height where a plan last closed the gripper [m] (None: open)
         self.max_joint_limit_violation = 0.0  # measured joint positions past [q_min, q_max] [rad]
         self.max_reference_limit_excess = 0.0  # commanded (reference) positions past them [rad]: should stay 0
         self.max_velocity_ratio = 0.0
@@ -301,6 +302,7 @@ class MotionExecutor:
                            target=[round(float(v), 4) for v in self.points[i]])
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
+            self.grasp_tcp_z = float(self.sim.tcp_pos()[2]) if self.grip[i] else None
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
             self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
             self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
@@ -317,7 +319,7 @@ class MotionExecutor:
         """The simulator was reset (arm at home): drop the plan and restart the reference there."""
         self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
         self.rots = np.zeros((0, 3, 3))
-        self.index, self.phase = -1, "idle"
+        self.index, self.phase, self.grasp_tcp_z = -1, "idle", None
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
         self.controller.reset(self.dyn, self._last_tau)
@@ -334,6 +336,7 @@ class MotionExecutor:
     def open_empty_gripper(self, opening_m: float) -> None:
         """The closed gripper holds nothing (its fingers met): open it, so the next plan starts from an open hand."""
         self.sim.set_gripper(False)
+        self.grasp_tcp_z = None
         self.event("gripper", closed=False, reason="grasp_empty", opening_m=round(opening_m, 5))
         self.phase = "done"  # the plan's remaining stops assumed an object in the hand; a new plan follows
 

@@ -150,7 +150,6 @@ class Supervisor:
                                                                   and world_kind == "libero")
         self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
         self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
-        self._closed_at_z = None  # TCP height where the gripper was closed [m]
         self.empty_grasps = 0
         self.overruled = 0
         self.t_f = resolve_t_f(config.t_f, world_kind)  # None: the global phase lasts as long as its plan
@@ -282,16 +281,13 @@ class Supervisor:
 
     def _grasp_is_empty(self, executor) -> bool:
         """True once the closed gripper has measured empty for ``empty_grasp_steps`` steps while the hand is at least
-        ``empty_grasp_lift_m`` above where it closed: a pick lifts what it holds, while a knob turned or a drawer or
-        door pushed with closed fingers (an empty hand on purpose) keeps low."""
+        ``empty_grasp_lift_m`` above where a plan closed it: a pick lifts what it holds, while a knob turned or a drawer
+        or door pushed with closed fingers (an empty hand on purpose) keeps low."""
         sim = executor.sim
-        closed = sim.gripper_closed_cmd()
-        if closed and self._closed_at_z is None:
-            self._closed_at_z = float(sim.tcp_pos()[2])
-        elif not closed:
-            self._closed_at_z = None
-        empty = (closed and sim.gripper_opening_m() < self.cfg.empty_grasp_m
-                 and float(sim.tcp_pos()[2]) - self._closed_at_z >= self.cfg.empty_grasp_lift_m)
+        closed_at = executor.grasp_tcp_z
+        empty = (sim.gripper_closed_cmd() and closed_at is not None
+                 and sim.gripper_opening_m() < self.cfg.empty_grasp_m
+                 and float(sim.tcp_pos()[2]) - closed_at >= self.cfg.empty_grasp_lift_m)
         self._empty_steps = self._empty_steps + 1 if empty else 0
         if self._empty_steps < self.cfg.empty_grasp_steps:
             return False

@@ -189,6 +189,7 @@ class CameraExecutor(FakeExecutor):
     def __init__(self):
         self.sim = GripperSim([0.08])  # an open hand (LIBERO's empty-grasp check reads it)
         self.sim.closed = False
+        self.grasp_tcp_z = None
 
 
 def confirm_decisions(cfg, planner, steps, world_kind="libero"):
@@ -260,6 +261,10 @@ class GripperSim:
 class GripperExecutor(FakeExecutor):
     def __init__(self, openings):
         self.sim, self.opened = GripperSim(openings), []
+
+    @property
+    def grasp_tcp_z(self):  # where the plan closed the hand: the first height
+        return self.sim.heights[0] if self.sim.closed else None
 
     def open_empty_gripper(self, opening_m):
         self.sim.closed = False

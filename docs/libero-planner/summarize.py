@@ -144,7 +144,11 @@ def heldout_lines() -> list[str]:
 
 
 EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shipped-400"),
-         ("stage 2 on part of the online data, not shipped", "eval-stage2"), ("shipped checkpoint", "eval-shipped"))
+         ("stage 2 on part of the online data, not shipped", "eval-stage2"),
+         ("shipped checkpoint, GLSR with t_f = 16", "eval-shipped"),
+         ("shipped checkpoint, t_f = plan, no empty-grasp check", "eval-shipped-tf-plan"),
+         ("shipped checkpoint, current GLSR defaults", "eval-shipped-glsr"))
+PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr")  # GLSR rows compared with the shipped checkpoint's global-only
 
 
 def _episodes(name: str) -> list[dict]:
@@ -199,16 +203,21 @@ def eval_lines() -> list[str]:
         n = sum(oracle[s][1] for s in SUITES)
         lines.append("| oracle (privileged) | " + " | ".join(rate(*oracle[s]) for s in SUITES) + f" | {rate(k, n)} |")
     lines.append("")
-    label, _, eps = runs[-1]
-    by = {(e["mode"], e["task"], e["seed"]): e for e in eps}
-    pairs_g = [(by[("global", t, s)], e) for (m, t, s), e in by.items() if m == "glsr" and ("global", t, s) in by]
-    if pairs_g:
+    shipped_global = {(e["task"], e["seed"]): e for e in _episodes("eval-shipped") if e["mode"] == "global"}
+    for label, name, eps in runs:
+        if name not in PAIRED:
+            continue
+        glob = {(e["task"], e["seed"]): e for e in eps if e["mode"] == "global"} or shipped_global
+        pairs_g = [(glob[(e["task"], e["seed"])], e) for e in eps
+                   if e["mode"] == "glsr" and (e["task"], e["seed"]) in glob]
+        if not pairs_g:
+            continue
         both = sum(g["success"] and e["success"] for g, e in pairs_g)
         lost = [e for g, e in pairs_g if g["success"] and not e["success"]]
         won = sum(e["success"] and not g["success"] for g, e in pairs_g)
         stops = sum(e["stopped_by"] == "detector" and not e["success"] for _, e in pairs_g)
-        lines.append(f"- {label}, GLSR against global-only on the same {len(pairs_g)} (task, init state) pairs: both "
-                     f"succeed {both}, only GLSR {won}, only global-only {len(lost)} (of those, "
+        lines.append(f"- {label}, GLSR against global-only (shipped checkpoint) on the same {len(pairs_g)} (task, init "
+                     f"state) pairs: both succeed {both}, only GLSR {won}, only global-only {len(lost)} (of those, "
                      f"{sum(e['stopped_by'] == 'detector' for e in lost)} ended by the detector judging the task done, "
                      f"{sum(e['stopped_by'] == 'time_limit' for e in lost)} at the time limit); {stops} GLSR episodes "
                      f"in all ended on a detector verdict while the task was not done.")
@@ -219,6 +228,46 @@ def eval_lines() -> list[str]:
         lines.append(f"- {label}: worst joint-limit violation {viol:.4f} rad; faulted episodes {faults} (none counted "
                      "as success)" + (f"; GLSR replanned {sum(replans) / len(replans):.1f} times per episode on average."
                                       if replans else "."))
+    return lines
+
+
+PERTURB = "eval-perturb"  # make libero-planner-perturb: sampled reporting layouts, every perturbation family
+
+
+def perturb_lines() -> list[str]:
+    """GLSR against global-only per perturbation family (the issue's bar: GLSR >= global-only + 25 points on
+    average), from the episodes `tcot eval` recorded; a perturbation that never fired is left out of its rate."""
+    eps = _episodes(PERTURB)
+    if not eps:
+        return ["- perturbations on LIBERO not evaluated yet (`make libero-planner-perturb`)"]
+    r = json.loads((HERE / PERTURB / "eval.json").read_text()) if (HERE / PERTURB / "eval.json").is_file() else None
+    seeds = sorted({e["seed"] for e in eps})
+    got: dict = defaultdict(lambda: [0, 0])
+    unfired: dict = defaultdict(int)
+    for e in eps:
+        if e.get("perturbation_fired") is False:
+            unfired[(e["perturb"], e["mode"])] += 1
+            continue
+        got[(e["perturb"], e["mode"])][0] += bool(e["success"])
+        got[(e["perturb"], e["mode"])][1] += 1
+    names = sorted({p for p, _ in got})
+    how = (f"{len(eps)} episodes, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
+           if r and r["ran_now"] == r["episodes"] == len(eps) else f"{len(eps)} episodes, over several runs")
+    lines = [f"**Perturbations on LIBERO** (`make libero-planner-perturb` → `docs/libero-planner/{PERTURB}/`; shipped "
+             f"checkpoint; sampled reporting layouts {seeds[0]}-{seeds[-1]}, one per task and family, all 40 tasks; "
+             f"{how}; episodes whose perturbation could not fire left out):", "",
+             "| perturbation | global-only | GLSR | GLSR - global-only [points] |", "|---|---|---|---|"]
+    diffs = []
+    for nm in names:
+        g, l = got[(nm, "global")], got[(nm, "glsr")]
+        d = 100 * (l[0] / l[1] - g[0] / g[1]) if g[1] and l[1] else None
+        if d is not None:
+            diffs.append(d)
+        left = sum(unfired[(nm, m)] for m in ("global", "glsr"))
+        lines.append(f"| {nm}{f' ({left} not fired)' if left else ''} | {rate(*g)} | {rate(*l)} | "
+                     + (f"{d:+.1f}" if d is not None else "-") + " |")
+    if diffs:
+        lines.append(f"| average over families | | | {sum(diffs) / len(diffs):+.1f} |")
     return lines
 
 
@@ -262,7 +311,8 @@ def confirm_lines() -> list[str]:
 
 
 def main() -> None:
-    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + latency_lines() + confirm_lines()) + "\n"
+    text = "\n".join(build_lines() + [""] + eval_lines() + [""] + perturb_lines() + [""] + latency_lines()
+                     + confirm_lines()) + "\n"
     (HERE / "summary.md").write_text(text)
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-planner", text)

@@ -1,0 +1,131 @@
+"""How GLSR's two LIBERO settings were chosen (docs/libero-planner.md, "Choosing t_f on LIBERO" and "Empty grasps"),
+on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+):
+
+    .venv/bin/python docs/libero-planner/glsr_choices.py --gather   # runs/dev/* -> glsr_choices.json (one line each)
+    .venv/bin/python docs/libero-planner/glsr_choices.py            # glsr_choices.json -> docs/libero-planner.md
+
+The evaluations it reads (`tcot eval`, shipped checkpoint, 2 workers) are listed in RUNS with the command that makes
+each; the first runs were made before the two settings existed, when t_f = 16 and no empty-grasp check were the
+defaults, and the commands below name those values explicitly (the episodes replay identically).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+OUT = HERE / "glsr_choices.json"
+SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+S4 = ",".join(SUITES)
+SECTION = "libero-glsr-choices"
+
+OLD = "--sweep supervisor.t_f=16 --supervisor.empty-grasp off"
+# (run directory under runs/dev, setting label, command)
+RUNS = (
+    ("tf16", "t_f = 16, no empty-grasp check",
+     f"tcot eval --suite {S4} --planners learned --modes global,glsr --init sampled --episodes 2 --seed-start 20000 {OLD}"),
+    ("tf1000", "t_f = plan, no empty-grasp check",
+     f"tcot eval --suite {S4} --planners learned --modes glsr --init sampled --episodes 2 --seed-start 20000 "
+     "--sweep supervisor.t_f=1000 --supervisor.empty-grasp off"),
+    ("eg3_so", "t_f = plan, empty-grasp check",
+     "tcot eval --suite libero_spatial,libero_object --planners learned --modes glsr --init sampled --episodes 2 "
+     "--seed-start 20000"),
+    ("eg3_goal10", "t_f = plan, empty-grasp check",
+     "tcot eval --suite libero_goal,libero_10 --planners learned --modes glsr --init sampled --episodes 2 "
+     "--seed-start 20000"),
+    ("pert_tf16", "t_f = 16, no empty-grasp check",
+     "tcot eval --suite libero_spatial,libero_object --planners learned --modes global,glsr "
+     f"--perturb object_moved,object_drop --init sampled --episodes 1 --seed-start 20000 {OLD}"),
+    ("pert_global_offcenter", "-",
+     "tcot eval --suite libero_spatial,libero_object --planners learned --modes global --perturb offcenter_grasp "
+     "--init sampled --episodes 1 --seed-start 20000"),
+    ("pert_eg3", "t_f = plan, empty-grasp check",
+     "tcot eval --suite libero_spatial,libero_object --planners learned --modes glsr "
+     "--perturb object_moved,object_drop,offcenter_grasp --init sampled --episodes 1 --seed-start 20000"),
+)
+KEEP = ("task", "suite", "mode", "seed", "perturb", "success", "stopped_by", "steps", "replans", "empty_grasps",
+        "perturbation_fired")
+
+
+def gather() -> None:
+    rows = []
+    for name, setting, cmd in RUNS:
+        p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
+        if not p.is_file():
+            print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
+            continue
+        for line in p.read_text().splitlines():
+            e = json.loads(line)
+            rows.append({"run": name, "setting": "-" if e["mode"] == "global" else setting,
+                         **{k: e.get(k) for k in KEEP}})
+    OUT.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    print(f"{len(rows)} episodes -> {OUT.relative_to(ROOT)}")
+
+
+def frac(k: int, n: int) -> str:
+    return f"{k}/{n}" if n else "-"
+
+
+def lines() -> list[str]:
+    rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
+    out = ["**No perturbation** (sampled development layouts 20000-20001, all 40 tasks; successes / episodes):", "",
+           "| mode | setting | " + " | ".join(SUITES) + " | all four | ended on a detector verdict, not done |",
+           "|" + "---|" * (len(SUITES) + 4)]
+    clean = [r for r in rows if r["perturb"] == "none"]
+    cells: dict = defaultdict(list)
+    for r in clean:
+        cells[(r["mode"], r["setting"])].append(r)
+    for (mode, setting), eps in sorted(cells.items(), key=lambda kv: (kv[0][0] != "global", kv[0][1])):
+        per = [frac(sum(e["success"] for e in eps if e["suite"] == s), sum(e["suite"] == s for e in eps))
+               for s in SUITES]
+        stops = sum(e["stopped_by"] == "detector" and not e["success"] for e in eps)
+        out.append(f"| {mode} | {setting} | " + " | ".join(per)
+                   + f" | {frac(sum(e['success'] for e in eps), len(eps))} | {stops} |")
+    glob = {(r["task"], r["seed"]): r["success"] for r in clean if r["mode"] == "global"}
+    out.append("")
+    for (mode, setting), eps in sorted(cells.items()):
+        if mode != "glsr":
+            continue
+        paired = [(glob[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in glob]
+        out.append(f"- GLSR ({setting}) against global-only on the same {len(paired)} layouts: only GLSR "
+                   f"{sum(b and not a for a, b in paired)}, only global-only {sum(a and not b for a, b in paired)}.")
+    pert = [r for r in rows if r["perturb"] != "none"]
+    if pert:
+        names = sorted({r["perturb"] for r in pert})
+        out += ["", "**Perturbations** (libero_spatial and libero_object, development layout 20000, one episode per task "
+                "and perturbation; successes / episodes, and the empty-grasp reopenings per episode):", "",
+                "| mode | setting | " + " | ".join(names) + " |", "|" + "---|" * (len(names) + 2)]
+        pc: dict = defaultdict(list)
+        for r in pert:
+            pc[(r["mode"], r["setting"])].append(r)
+        for (mode, setting), eps in sorted(pc.items(), key=lambda kv: (kv[0][0] != "global", kv[0][1])):
+            cols = []
+            for nm in names:
+                sel = [e for e in eps if e["perturb"] == nm]
+                eg = sum(e.get("empty_grasps") or 0 for e in sel)
+                cols.append(f"{frac(sum(e['success'] for e in sel), len(sel))}"
+                            + (f" ({eg / len(sel):.1f})" if sel and mode == "glsr" and "empty-grasp check" in setting
+                               and "no " not in setting else ""))
+            out.append(f"| {mode} | {setting} | " + " | ".join(cols) + " |")
+    out += ["", "Commands (each with `--workers 2 --out runs/dev/<run>`; `glsr_choices.py --gather` reads them):", ""]
+    out += [f"- `{name}`: `{cmd}`" for name, _, cmd in RUNS]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--gather", action="store_true", help="read runs/dev/* into glsr_choices.json first")
+    args = ap.parse_args()
+    if args.gather:
+        gather()
+    from tcot_hybrid.markdown import update_readme_section
+
+    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, "\n".join(lines()))
+    print("\n".join(lines()))
+
+
+if __name__ == "__main__":
+    main()
