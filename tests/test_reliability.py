@@ -851,7 +851,9 @@ def _typed(obj, cls) -> None:
         if typing.get_origin(tp) is dict:
             assert isinstance(v, dict) and all(isinstance(k, str) for k in v), (f.name, v)
             continue
-        assert isinstance(v, tuple(typing.get_origin(a) or a for a in allowed)), (f.name, v, tp)
+        choices = [c for a in allowed if typing.get_origin(a) is typing.Literal for c in typing.get_args(a)]
+        types = tuple(typing.get_origin(a) or a for a in allowed if typing.get_origin(a) is not typing.Literal)
+        assert (v in choices and not isinstance(v, bool)) or isinstance(v, types), (f.name, v, tp)
         if isinstance(v, float):
             assert math.isfinite(v), (f.name, v)
 
