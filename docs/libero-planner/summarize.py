@@ -254,7 +254,8 @@ def perturb_lines() -> list[str]:
     how = (f"{len(eps)} episodes, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
            if r and r["ran_now"] == r["episodes"] == len(eps) else f"{len(eps)} episodes, over several runs")
     lines = [f"**Perturbations on LIBERO** (`make libero-planner-perturb` → `docs/libero-planner/{PERTURB}/`; shipped "
-             f"checkpoint; sampled reporting layouts {seeds[0]}-{seeds[-1]}, one per task and family, all 40 tasks; "
+             f"checkpoint; sampled reporting layout{'s' if len(seeds) > 1 else ''} "
+             f"{seeds[0]}{f'-{seeds[-1]}' if len(seeds) > 1 else ''}, one per task and family, all 40 tasks; "
              f"{how}; episodes whose perturbation could not fire left out):", "",
              "| perturbation | global-only | GLSR | GLSR - global-only [points] |", "|---|---|---|---|"]
     diffs = []
