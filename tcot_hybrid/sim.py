@@ -166,7 +166,8 @@ class Simulation:
         return bool(self.data.ctrl[self.gripper_act] == self.robot.gripper_closed)
 
     def gripper_opening_m(self) -> float:
-        """Measured finger opening: the finger joints' travel from closed, summed [m] (proprioception)."""
+        """Measured finger opening [m]: the finger joints' travel from closed (joint position 0 on the bundled
+        grippers), summed (proprioception)."""
         return float(np.abs(self.data.qpos[self.gripper_qpos]).sum())
 
     # --- rendering --------------------------------------------------------------------------------

@@ -71,11 +71,11 @@ class SupervisorConfig:
                        "auto": local_plan on LIBERO (its detector saw no rollouts and called unfinished tasks done on
                        nearly every step: docs/libero-planner.md), off on the workcell (its reporting tables were
                        measured without it).
-    empty_grasp:       glsr modes: "on" (reopen a gripper that closed on nothing and replan locally, see the module doc),
-                       "off", or "auto": on for LIBERO (docs/libero-planner.md, "Empty grasps"), off on the workcell
+    empty_grasp:       glsr modes: "on" (reopen a gripper that closed on nothing and replan locally, see the module
+                       doc), "off", or "auto": on for LIBERO (docs/libero-planner.md, "Empty grasps"), off on the workcell
                        (its reporting tables were measured without it).
     empty_grasp_m:     finger opening [m, both fingers' travel] below which a closed gripper holds nothing. The
-                       LIBERO Panda's fingers stop at 1.2 mm closing on nothing and at 3.8 mm or more on the thinnest
+                       LIBERO Panda's fingers stop at 1.2 mm closing on nothing and at 3.5 mm or more on the thinnest
                        object grasped (a bowl's rim; docs/libero-planner.md). Up: thin objects count as missed; down:
                        a missed grasp may go unnoticed.
     empty_grasp_steps: consecutive planner steps the opening must stay below ``empty_grasp_m`` (fingers take
