@@ -147,8 +147,9 @@ EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shi
          ("stage 2 on part of the online data, not shipped", "eval-stage2"),
          ("shipped checkpoint, GLSR with t_f = 16", "eval-shipped"),
          ("shipped checkpoint, t_f = plan, no empty-grasp check", "eval-shipped-tf-plan"),
-         ("shipped checkpoint, current GLSR defaults", "eval-shipped-glsr"))
-PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr")  # GLSR rows compared with the shipped checkpoint's global-only
+         ("shipped checkpoint, current GLSR defaults", "eval-shipped-glsr"),
+         ("detector alone fine-tuned on online rollouts, current GLSR defaults, not shipped", "eval-shipped-detect"))
+PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr", "eval-shipped-detect")  # GLSR rows compared with the shipped checkpoint's global-only
 
 
 def _episodes(name: str) -> list[dict]:
