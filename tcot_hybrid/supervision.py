@@ -184,8 +184,8 @@ class Supervisor:
             if step % cfg.t_l == 0:
                 return self._plan(step, "local", "period", executor)
             return Decision(None, False, None)
-        if self.check_empty_grasp and self._grasp_is_empty(executor):  # before any observation of this step
-            opening = executor.sim.gripper_opening_m()
+        opening = self._empty_grasp_opening(executor) if self.check_empty_grasp else None
+        if opening is not None:  # before any observation of this step
             executor.open_empty_gripper(opening)
             self.empty_grasps += 1
             self.state = "local_follow"
@@ -279,20 +279,21 @@ class Supervisor:
             return plan, motion
         return None, motion
 
-    def _grasp_is_empty(self, executor) -> bool:
-        """True once the closed gripper has measured empty for ``empty_grasp_steps`` steps while the hand is at least
-        ``empty_grasp_lift_m`` above where a plan closed it: a pick lifts what it holds, while a knob turned or a drawer
-        or door pushed with closed fingers (an empty hand on purpose) keeps low."""
+    def _empty_grasp_opening(self, executor) -> float | None:
+        """The measured finger opening [m] once the closed gripper has measured empty for ``empty_grasp_steps`` steps
+        while the hand is at least ``empty_grasp_lift_m`` above where a plan closed it, else None: a pick lifts what it
+        holds, while a knob turned or a drawer or door pushed with closed fingers (an empty hand on purpose) keeps
+        low."""
         sim = executor.sim
         closed_at = executor.grasp_tcp_z
-        empty = (sim.gripper_closed_cmd() and closed_at is not None
-                 and sim.gripper_opening_m() < self.cfg.empty_grasp_m
+        opening = sim.gripper_opening_m()
+        empty = (sim.gripper_closed_cmd() and closed_at is not None and opening < self.cfg.empty_grasp_m
                  and float(sim.tcp_pos()[2]) - closed_at >= self.cfg.empty_grasp_lift_m)
         self._empty_steps = self._empty_steps + 1 if empty else 0
         if self._empty_steps < self.cfg.empty_grasp_steps:
-            return False
+            return None
         self._empty_steps = 0
-        return True
+        return opening
 
     def _geometric_reason(self, executor) -> str | None:
         if getattr(executor, "plans_infeasible", 0) > self._infeasible_at_plan:

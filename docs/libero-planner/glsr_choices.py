@@ -126,8 +126,9 @@ def main() -> None:
         gather()
     from tcot_hybrid.markdown import update_readme_section
 
-    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, "\n".join(lines()))
-    print("\n".join(lines()))
+    text = "\n".join(lines())
+    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, text)
+    print(text)
 
 
 if __name__ == "__main__":

@@ -136,13 +136,18 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
 def online_split_size(path: str | Path, split: str) -> int:
     """Episodes of online file ``path`` in ``split`` (by seed, as :func:`load_online_frames` splits them): a file of
     one seed per task (e.g. one rollout per task and perturbation) falls wholly into one split."""
-    from tcot_hybrid.data.dataset import is_valid_seed
-
     if split not in ("train", "valid"):
         raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
     with open_demos(path) as f:
-        every = int(f.valid_every)
-        return sum(is_valid_seed(i.seed, every) == (split == "valid") for i in f.infos())
+        return len(_split_infos(f, split))
+
+
+def _split_infos(f, split: str) -> list:
+    """The episode infos of open online file ``f`` in ``split`` (by seed, like the demos)."""
+    from tcot_hybrid.data.dataset import is_valid_seed
+
+    every = int(f.valid_every)
+    return [i for i in f.infos() if is_valid_seed(i.seed, every) == (split == "valid")]
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
@@ -152,13 +157,10 @@ def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windo
     ``RECOVERY_DENSE_STEPS`` of a recovery): all for failure detection; those of successful
     oracle episodes from their first plan after the perturbation on (``recover_step``) also carry trajectory
     labels (recovery demonstrations)."""
-    from tcot_hybrid.data.dataset import is_valid_seed
-
     if split not in ("train", "valid"):
         raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
     with open_demos(path) as f:
-        every = int(f.valid_every)
-        names = [i.name for i in f.infos() if is_valid_seed(i.seed, every) == (split == "valid")]
+        names = [i.name for i in _split_infos(f, split)]
         if not names:
             raise DatasetError(f"online data file {path}: split {split!r} has no episodes")
 
