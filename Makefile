@@ -144,8 +144,17 @@ else
 	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
 		sys.exit(0 if run_finished('runs/libero/planner50.safetensors') else 3)" \
 		|| (echo "train_libero50.yaml stopped at its time cap (max_minutes): make libero-planner again resumes it"; exit 1)
-	cp runs/libero/planner50.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
-	cp runs/libero/planner50.json tcot_hybrid/checkpoints/libero_panda_default.json
+	# from nothing the collection already runs each demo through its release: the fine-tune reads that file
+	$(BIN)/tcot train --config examples/configs/train_libero_v2.yaml --data data/demos_libero_panda.hdf5 --resume \
+		>> runs/libero/train_v2.log 2>&1 || (tail -5 runs/libero/train_v2.log; exit 1)
+	tr '\r' '\n' < runs/libero/train_v2.log | grep -v "it/s\|s/it\|step/s\|s/step\|^\s*$$\|WARNING\|macro" \
+		> docs/libero-planner/train_v2.log
+	cp runs/libero/planner_v2.metrics.jsonl docs/libero-planner/train_v2.metrics.jsonl
+	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
+		sys.exit(0 if run_finished('runs/libero/planner_v2.safetensors') else 3)" \
+		|| (echo "train_libero_v2.yaml stopped at its time cap (max_minutes): make libero-planner again resumes it"; exit 1)
+	cp runs/libero/planner_v2.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
+	cp runs/libero/planner_v2.json tcot_hybrid/checkpoints/libero_panda_default.json
 endif
 	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
 		|| (tail -5 runs/libero/direct_train.log; exit 1)

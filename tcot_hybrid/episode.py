@@ -279,12 +279,16 @@ class EpisodeRunner:
                          true_success=bool(s.task.success(s.sim.world)), **({"rejected": rejected} if rejected else {}))
         return self._stop_hold >= cfg.stop_hold_steps
 
-    def run(self, progress=None, *, steps_after_success: int = 0, probe_detector: bool = False) -> dict:
+    def run(self, progress=None, *, steps_after_success: int = 0, probe_detector: bool = False,
+            finish_plan_steps: int = 0) -> dict:
         """Run until the episode ends: the task's success predicate holds (``stop_on`` simulator or either) or the
         failure detector says so (``stop_on`` detector or either; success is then the predicate on the final state), the time
         limit, or a fault. ``steps_after_success`` keeps stepping (the arm holds its last plan) a few planner
         steps past a simulator-judged success, e.g. to record success frames; with ``probe_detector`` the
-        planner's failure detector is asked at each of those steps (its false-alarm rate is measured on them)."""
+        planner's failure detector is asked at each of those steps (its false-alarm rate is measured on them).
+        ``finish_plan_steps`` first lets the executor carry its plan out past a simulator-judged success reached with
+        the gripper closed, for at most that many planner steps: a demonstration then shows the release that follows
+        a success reached while the object is still held."""
         s, cfg = self.stack, self.cfg
         t0 = time.perf_counter()
         max_steps = self.max_steps
@@ -321,6 +325,12 @@ class EpisodeRunner:
             if (by_detector or self.stopped_by == "detector") and self.fault is None:
                 self.success = bool(s.task.success(s.sim.world))  # judged afterwards, on the state it stopped in
             self.success_time_s = s.sim.time_s if self.success else None
+            held = self.success and not by_detector and s.sim.gripper_closed_cmd()
+            finishing = finish_plan_steps if held else 0
+            while finishing > 0 and not s.executor.plan_finished and s.sim.fault is None:
+                self._step_once(step, may_plan=False)
+                step += 1
+                finishing -= 1
             for _ in range(steps_after_success if self.success and not by_detector else 0):
                 if probe_detector:
                     p = s.planner.success_probability(self.observe(step))

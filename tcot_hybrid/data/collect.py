@@ -35,6 +35,11 @@ from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
+# ... and on LIBERO, before those, the plan is carried out (at most this many planner steps): LIBERO judges several
+# tasks done while the object is still held (butter in the basket, the book in the caddy), and demos that stopped
+# there taught plans with no release (docs/libero-planner.md, "Demonstrations through the release"). The workcell's
+# goals hold only once the object is released, and its shipped data and tables were collected without it.
+FINISH_PLAN_STEPS = {"libero": 60, "workcell": 0}
 TRAIN_SEED_LIMIT = 1000  # workcell seeds >= this are evaluation seeds: never collect training data on them
 # LIBERO: sampled layouts 0-49999 are for training and tuning, 90000+ report (docs/seeds.md); the shipped init
 # states are the test set and are never collected.
@@ -70,13 +75,19 @@ def _quat_wxyz(xmat: np.ndarray) -> np.ndarray:
 
 
 def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress=None,
-                image_every: int = 1) -> DemoRecord:
+                image_every: int = 1, finish_plan_steps: int | None = None) -> DemoRecord:
     """Run one episode of ``cfg`` and return its samples (see module doc). Raises on a crash.
 
     ``image_every`` > 1 renders the planner image only at every k-th sample and the last one (rendering a
     LIBERO scene costs 28-80 ms a frame, the rest of a sample microseconds): the other samples keep their
     robot state and track (labels need the whole track) with a black frame, and ``obs/image_valid`` marks
-    the rendered ones. Loaders never train on a frame without an image."""
+    the rendered ones. Loaders never train on a frame without an image.
+
+    After a success reached with the gripper closed the plan is carried out (``finish_plan_steps``, None: the world's
+    ``FINISH_PLAN_STEPS``). Only a release that keeps the success is kept: when the gripper stays closed (a knob
+    turned, a door pushed shut: the rest of the plan is a retreat, which would thin the labelled points of the motion
+    that mattered) or the release undoes the success (the book tips out of the caddy's compartment), the episode is
+    recorded again, ending a few steps after success as before."""
     require_int("image_every", image_every, minimum=1)
     from tcot_hybrid.episode import EpisodeRunner
 
@@ -107,7 +118,14 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         steps_seen.append(step)
 
     runner.pre_step_hook = sample
-    rec = runner.run(progress, steps_after_success=steps_after_success)
+    if finish_plan_steps is None:
+        finish_plan_steps = FINISH_PLAN_STEPS[task.world_kind]
+    rec = runner.run(progress, steps_after_success=steps_after_success, finish_plan_steps=finish_plan_steps)
+    first = next((r for r in rows if r["success"]), None)
+    finished = finish_plan_steps and rec["success"] and first is not None and first["gripper_closed"]
+    if finished and (sim.gripper_closed_cmd() or not task.success(sim.world)):
+        return record_demo(cfg, steps_after_success=steps_after_success, progress=progress, image_every=image_every,
+                           finish_plan_steps=0)
     if not steps_seen or steps_seen[-1] < runner.steps:  # the final state was not sampled (abort path)
         sample(runner, runner.steps)
     if not rows[-1]["rendered"]:  # the last sample is the state the episode ended in: always render it
