@@ -169,12 +169,12 @@ endif
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md
 # names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR. Then the direct baseline
 # on sampled development layouts (seeds 20000-20002 of libero_object; docs/libero-planner.md, "Direct baseline").
-# GLSR with the current supervisor defaults in its own folder: eval-shipped's GLSR rows were measured with t_f = 16
+# The shipped checkpoint (demos through the release, 6 switches per plan) in eval-shipped-v2; the folders eval-shipped
+# (2000-demo checkpoint, GLSR with t_f = 16) and eval-shipped-glsr (same checkpoint, current GLSR defaults) are kept
+# beside it (an episode's key holds its checkpoint's hash: a rerun there evaluates the shipped one and mixes them)
 libero-planner-eval: setup
-	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global --init shipped --episodes 2 \
-		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped
-	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes glsr --init shipped --episodes 2 \
-		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped-glsr
+	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --init shipped --episodes 2 \
+		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped-v2
 	$(BIN)/python docs/libero-planner/summarize.py
 	$(BIN)/tcot eval --suite libero_object --planners direct --init sampled --episodes 3 --seed-start 20000 \
 		--workers 2 --out docs/libero-planner/eval-direct
@@ -184,7 +184,7 @@ libero-planner-eval: setup
 LIBERO_PERTURBS := object_moved,target_moved,object_drop,offcenter_grasp,arm_push,camera_noise,camera_shift,init_posture
 libero-planner-perturb: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --perturb $(LIBERO_PERTURBS) \
-		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb
+		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb-v2
 	$(BIN)/python docs/libero-planner/summarize.py
 
 clean:

@@ -54,9 +54,21 @@ def build_lines() -> list[str]:
                      f"{float(wall) / 60:.1f} min wall with 2 workers on 2 shared cores, a planner image every 3rd "
                      f"step; {failed} unsuccessful (kept, never imitated), {crashed} crashed; {mib} MiB; "
                      f"{ntr} training / {nva} validation demos (split by seed).")
+    log2 = HERE / "collect_v2.log"
+    if log2.is_file():
+        parts = re.findall(r"(\d+) demos written \((\d+) already present, (\d+) unsuccessful kept, (\d+) crashed\) in "
+                           r"([\d.]+) s", log2.read_text())
+        lines.append(f"- **Recollection through the release** (`docs/libero-planner/collect_v2.log`, "
+                     f"`data/demos_libero_panda_v2.hdf5`): the demos that ended with the gripper closed collected again "
+                     f"in {len(parts)} parts ({', '.join(p[0] for p in parts)} episodes; "
+                     f"{sum(float(p[4]) for p in parts) / 60:.1f} min wall with 2 workers; "
+                     f"{sum(int(p[2]) for p in parts)} unsuccessful, {sum(int(p[3]) for p in parts)} crashed).")
     runs = [("train", "examples/configs/train_libero.yaml")]
-    if str(tc.get("out", "")).endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
+    out = str(tc.get("out", ""))
+    if out.endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
         runs = [("train50", "examples/configs/train_libero50.yaml")]
+    elif "planner_v2" in out:  # ... fine-tuned on the demos recollected through the release
+        runs = [("train50", "examples/configs/train_libero50.yaml"), ("train_v2", "examples/configs/train_libero_v2.yaml")]
     elif tc.get("init"):
         runs.append(("train_finetune", "examples/configs/train_libero_finetune.yaml"))
     total = 0.0
@@ -102,7 +114,7 @@ def heldout_lines() -> list[str]:
     """The read-out comparison and the per-suite breakdown (docs/libero-planner/heldout.py)."""
     rows = [(label, json.loads(p.read_text())) for label, p in (
         ("400 demos, first run", HERE / "heldout-first.json"), ("400 demos, shipped before", HERE / "heldout-400.json"),
-        ("shipped", HERE / "heldout.json")) if p.is_file()]
+        ("2000 demos, shipped before", HERE / "heldout.json")) if p.is_file()]
     if not rows:
         return []
     lines = ["", "By heatmap read-out (`docs/libero-planner/heldout.py` → `heldout-first.json`, `heldout.json`; median "
@@ -145,11 +157,14 @@ def heldout_lines() -> list[str]:
 
 EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shipped-400"),
          ("stage 2 on part of the online data, not shipped", "eval-stage2"),
-         ("shipped checkpoint, GLSR with t_f = 16", "eval-shipped"),
-         ("shipped checkpoint, t_f = plan, no empty-grasp check", "eval-shipped-tf-plan"),
-         ("shipped checkpoint, current GLSR defaults", "eval-shipped-glsr"),
-         ("detector alone fine-tuned on online rollouts, current GLSR defaults, not shipped", "eval-shipped-detect"))
-PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr", "eval-shipped-detect")  # GLSR rows compared with the shipped checkpoint's global-only
+         ("2000 demos, GLSR with t_f = 16", "eval-shipped"),
+         ("2000 demos, t_f = plan, no empty-grasp check", "eval-shipped-tf-plan"),
+         ("2000 demos, current GLSR defaults", "eval-shipped-glsr"),
+         ("2000 demos, detector alone fine-tuned on online rollouts, current GLSR defaults, not shipped",
+          "eval-shipped-detect"),
+         ("shipped: demos through the release, 6 switches per plan, current GLSR defaults", "eval-shipped-v2"))
+# GLSR rows compared with global-only of the same checkpoint (their own folder's, else the 2000-demo eval-shipped's)
+PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr", "eval-shipped-detect", "eval-shipped-v2")
 
 
 def _episodes(name: str) -> list[dict]:
@@ -217,7 +232,7 @@ def eval_lines() -> list[str]:
         lost = [e for g, e in pairs_g if g["success"] and not e["success"]]
         won = sum(e["success"] and not g["success"] for g, e in pairs_g)
         stops = sum(e["stopped_by"] == "detector" and not e["success"] for _, e in pairs_g)
-        lines.append(f"- {label}, GLSR against global-only (shipped checkpoint) on the same {len(pairs_g)} (task, init "
+        lines.append(f"- {label}, GLSR against global-only (same checkpoint) on the same {len(pairs_g)} (task, init "
                      f"state) pairs: both succeed {both}, only GLSR {won}, only global-only {len(lost)} (of those, "
                      f"{sum(e['stopped_by'] == 'detector' for e in lost)} ended by the detector judging the task done, "
                      f"{sum(e['stopped_by'] == 'time_limit' for e in lost)} at the time limit); {stops} GLSR episodes "
@@ -232,16 +247,24 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURB = "eval-perturb"  # make libero-planner-perturb: sampled reporting layouts, every perturbation family
+PERTURBS = (("shipped checkpoint", "eval-perturb-v2"), ("2000-demo checkpoint", "eval-perturb"))  # newest first
 
 
 def perturb_lines() -> list[str]:
+    out: list[str] = []
+    for label, folder in PERTURBS:
+        lines = perturb_table(folder, label)
+        out += (["", ""] if out and lines else []) + lines
+    return out or ["- perturbations on LIBERO not evaluated yet (`make libero-planner-perturb`)"]
+
+
+def perturb_table(folder: str, label: str) -> list[str]:
     """GLSR against global-only per perturbation family (the issue's bar: GLSR >= global-only + 25 points on
     average), from the episodes `tcot eval` recorded; a perturbation that never fired is left out of its rate."""
-    eps = _episodes(PERTURB)
+    eps = _episodes(folder)
     if not eps:
-        return ["- perturbations on LIBERO not evaluated yet (`make libero-planner-perturb`)"]
-    r = json.loads((HERE / PERTURB / "eval.json").read_text()) if (HERE / PERTURB / "eval.json").is_file() else None
+        return []
+    r = json.loads((HERE / folder / "eval.json").read_text()) if (HERE / folder / "eval.json").is_file() else None
     seeds = sorted({e["seed"] for e in eps})
     got: dict = defaultdict(lambda: [0, 0])
     unfired: dict = defaultdict(int)
@@ -254,8 +277,8 @@ def perturb_lines() -> list[str]:
     names = sorted({p for p, _ in got})
     how = (f"{len(eps)} episodes, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
            if r and r["ran_now"] == r["episodes"] == len(eps) else f"{len(eps)} episodes, over several runs")
-    lines = [f"**Perturbations on LIBERO** (`make libero-planner-perturb` → `docs/libero-planner/{PERTURB}/`; shipped "
-             f"checkpoint; sampled reporting layout{'s' if len(seeds) > 1 else ''} "
+    lines = [f"**Perturbations on LIBERO** (`make libero-planner-perturb` → `docs/libero-planner/{folder}/`; {label}; "
+             f"sampled reporting layout{'s' if len(seeds) > 1 else ''} "
              f"{seeds[0]}{f'-{seeds[-1]}' if len(seeds) > 1 else ''}, one per task and family, all 40 tasks; "
              f"{how}; episodes whose perturbation could not fire left out):", "",
              "| perturbation | global-only | GLSR | GLSR - global-only [points] |", "|---|---|---|---|"]
@@ -283,7 +306,7 @@ def latency_lines() -> list[str]:
     def ms(key: str) -> str:
         v = f[key]
         return f"{v['median']:.2f} ({v['min']:.2f}-{v['max']:.2f})"
-    return [f"**Planner latency on LIBERO** (`docs/libero-planner/latency.py` → `latency.json`; shipped checkpoint, "
+    return [f"**Planner latency on LIBERO** (`docs/libero-planner/latency.py` → `latency.json`; the 2000-demo checkpoint, the same network as the shipped one, "
             f"{r['image_px']} x {r['image_px']} px planner image, batch 1, {r['calls']} calls each, `{r['task']}` seed "
             f"{r['seed']}; median (min-max) ms per call; load average {r['load_average_1min'][0]:.2f} → "
             f"{r['load_average_1min'][1]:.2f} on {r['cpus']} shared cores):", "",

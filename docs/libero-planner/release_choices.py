@@ -1,0 +1,94 @@
+"""How the shipped LIBERO checkpoint's last training run was chosen (docs/libero-planner.md, "Demonstrations through
+the release"), global-only on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init
+states, never 90000+):
+
+    .venv/bin/python docs/libero-planner/release_choices.py --gather   # runs/dev/* -> release_choices.json
+    .venv/bin/python docs/libero-planner/release_choices.py            # release_choices.json -> docs/libero-planner.md
+
+Each candidate fine-tunes the 2000-demo run (runs/libero/planner50.safetensors) with examples/configs/
+train_libero_v2.yaml or a variant of it; the RUNS table names the checkpoint, the data and the windows of each.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+OUT = HERE / "release_choices.json"
+SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+S4 = ",".join(SUITES)
+SECTION = "libero-release-choices"
+EVAL = f"tcot eval --suite {S4} --planners learned --modes global --init sampled --episodes 2 --seed-start 20000"
+# (run directory under runs/dev, checkpoint, what it is, command)
+RUNS = (
+    ("tf16", "2000-demo run", "6 points per piece; demos ending a few steps after success",
+     f"{EVAL} (the global rows of glsr_choices.py's tf16)"),
+    ("v2_global", "runs/libero/v2a/planner_v2", "4 points per piece; every success reached holding carried through "
+     "the plan (recollection part 1 only)", f"{EVAL} --checkpoint runs/libero/v2a/planner_v2.safetensors"),
+    ("v2b_global", "runs/libero/v2b/planner_v2", "4 points per piece; demos through the release (both parts)",
+     f"{EVAL} --checkpoint runs/libero/v2b/planner_v2.safetensors"),
+    ("v2p6_global", "runs/libero/planner_v2p6", "6 points per piece; demos through the release (both parts)",
+     f"{EVAL} --checkpoint runs/libero/planner_v2p6.safetensors"),
+)
+KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "steps")
+
+
+def gather() -> None:
+    rows = []
+    for name, ck, what, cmd in RUNS:
+        p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
+        if not p.is_file():
+            print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
+            continue
+        for line in p.read_text().splitlines():
+            e = json.loads(line)
+            if e["mode"] == "global" and e["perturb"] == "none":
+                rows.append({"run": name, **{k: e.get(k) for k in KEEP}})
+    OUT.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    print(f"{len(rows)} episodes -> {OUT.relative_to(ROOT)}")
+
+
+def lines() -> list[str]:
+    rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
+    by_run: dict = defaultdict(list)
+    for r in rows:
+        by_run[r["run"]].append(r)
+    base = {(r["task"], r["seed"]): r["success"] for r in by_run.get(RUNS[0][0], [])}
+    out = ["Global-only, sampled development layouts 20000-20001, all 40 tasks (successes / episodes; won and lost "
+           "against the 2000-demo run on the same layouts):", "",
+           "| checkpoint | windows and data | " + " | ".join(SUITES) + " | all four | won / lost |",
+           "|" + "---|" * (len(SUITES) + 4)]
+    for name, ck, what, _ in RUNS:
+        eps = by_run.get(name)
+        if not eps:
+            continue
+        per = [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}"
+               for s in SUITES]
+        paired = [(base[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in base]
+        wl = "-" if name == RUNS[0][0] else (f"{sum(b and not a for a, b in paired)} / "
+                                              f"{sum(a and not b for a, b in paired)}")
+        out.append(f"| `{ck}` | {what} | " + " | ".join(per)
+                   + f" | {sum(e['success'] for e in eps)}/{len(eps)} | {wl} |")
+    out += ["", "Commands (each with `--workers 2 --out runs/dev/<run>`; `release_choices.py --gather` reads them):", ""]
+    out += [f"- `{name}`: `{cmd}`" for name, _, _, cmd in RUNS]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--gather", action="store_true", help="read runs/dev/* into release_choices.json first")
+    args = ap.parse_args()
+    if args.gather:
+        gather()
+    from tcot_hybrid.markdown import update_readme_section
+
+    text = "\n".join(lines())
+    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
