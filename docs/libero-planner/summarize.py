@@ -162,7 +162,7 @@ EVALS = (("400 demos, first run", "eval-shipped-first"), ("400 demos", "eval-shi
          ("2000 demos, current GLSR defaults", "eval-shipped-glsr"),
          ("2000 demos, detector alone fine-tuned on online rollouts, current GLSR defaults, not shipped",
           "eval-shipped-detect"),
-         ("shipped: demos through the release, 6 switches per plan, current GLSR defaults", "eval-shipped-v2"))
+         ("shipped: demos through the release, current GLSR defaults", "eval-shipped-v2"))
 # GLSR rows compared with global-only of the same checkpoint (their own folder's, else the 2000-demo eval-shipped's)
 PAIRED = ("eval-shipped", "eval-shipped-tf-plan", "eval-shipped-glsr", "eval-shipped-detect", "eval-shipped-v2")
 
@@ -237,6 +237,18 @@ def eval_lines() -> list[str]:
                      f"{sum(e['stopped_by'] == 'detector' for e in lost)} ended by the detector judging the task done, "
                      f"{sum(e['stopped_by'] == 'time_limit' for e in lost)} at the time limit); {stops} GLSR episodes "
                      f"in all ended on a detector verdict while the task was not done.")
+    # the shipped checkpoint against the one before it, mode by mode, on the same (task, init state) pairs
+    before = {"global": {(e["task"], e["seed"]): e["success"] for e in _episodes("eval-shipped") if e["mode"] == "global"},
+              "glsr": {(e["task"], e["seed"]): e["success"] for e in _episodes("eval-shipped-glsr")
+                       if e["mode"] == "glsr"}}
+    now = _episodes("eval-shipped-v2")
+    for mode, old in before.items():
+        pairs_m = [(old[(e["task"], e["seed"])], e["success"]) for e in now
+                   if e["mode"] == mode and (e["task"], e["seed"]) in old]
+        if pairs_m:
+            lines.append(f"- shipped against the 2000-demo checkpoint, {mode} (current defaults), on the same "
+                         f"{len(pairs_m)} pairs: only the shipped one succeeds {sum(b and not a for a, b in pairs_m)}, "
+                         f"only the 2000-demo one {sum(a and not b for a, b in pairs_m)}.")
     for label, _, eps in runs:
         faults = sum(bool(e["fault"]) for e in eps)
         viol = max(e["max_joint_limit_violation_rad"] for e in eps)
