@@ -124,6 +124,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     first = next((r for r in rows if r["success"]), None)
     finished = finish_plan_steps and rec["success"] and first is not None and first["gripper_closed"]
     if finished and (sim.gripper_closed_cmd() or not task.success(sim.world)):
+        sim.close()  # this scene is done with: the episode is recorded again in a fresh one
         return record_demo(cfg, steps_after_success=steps_after_success, progress=progress, image_every=image_every,
                            finish_plan_steps=0)
     if not steps_seen or steps_seen[-1] < runner.steps:  # the final state was not sampled (abort path)
