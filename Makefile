@@ -117,6 +117,19 @@ libero-oracle-eval: setup
 # on the same file (train_libero_direct.yaml, ~15 min) and copied to libero_panda_direct_default.*, which
 # `--planner direct` picks on LIBERO tasks.
 LIBERO_PLANNER_EPISODES ?= 50
+# One resumable training run of the recipe: $(1) config under examples/configs, $(2) its output's stem under
+# runs/libero, $(3) the log's name (runs/libero/ and, filtered, docs/libero-planner/), $(4) more `tcot train` arguments.
+# A run cut by max_minutes fails here naming the config; `make libero-planner` again resumes it.
+define libero_train_resumable
+	$(BIN)/tcot train --config examples/configs/$(1).yaml $(4) --resume >> runs/libero/$(3).log 2>&1 \
+		|| (tail -5 runs/libero/$(3).log; exit 1)
+	tr '\r' '\n' < runs/libero/$(3).log | grep -v "it/s\|s/it\|step/s\|s/step\|^\s*$$\|WARNING\|macro" \
+		> docs/libero-planner/$(3).log
+	cp runs/libero/$(2).metrics.jsonl docs/libero-planner/$(3).metrics.jsonl
+	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
+		sys.exit(0 if run_finished('runs/libero/$(2).safetensors') else 3)" \
+		|| (echo "$(1).yaml stopped at its time cap (max_minutes): make libero-planner again resumes it"; exit 1)
+endef
 libero-planner: setup
 	mkdir -p docs/libero-planner runs/libero
 	$(BIN)/tcot collect --suite $(LIBERO_SUITES) --episodes-per-task $(LIBERO_PLANNER_EPISODES) --seed-start 0 \
@@ -136,23 +149,9 @@ ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	cp runs/libero/planner_ft.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner_ft.json tcot_hybrid/checkpoints/libero_panda_default.json
 else
-	$(BIN)/tcot train --config examples/configs/train_libero50.yaml --resume >> runs/libero/train50.log 2>&1 \
-		|| (tail -5 runs/libero/train50.log; exit 1)
-	tr '\r' '\n' < runs/libero/train50.log | grep -v "it/s\|s/it\|step/s\|s/step\|^\s*$$\|WARNING\|macro" \
-		> docs/libero-planner/train50.log
-	cp runs/libero/planner50.metrics.jsonl docs/libero-planner/train50.metrics.jsonl
-	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
-		sys.exit(0 if run_finished('runs/libero/planner50.safetensors') else 3)" \
-		|| (echo "train_libero50.yaml stopped at its time cap (max_minutes): make libero-planner again resumes it"; exit 1)
+	$(call libero_train_resumable,train_libero50,planner50,train50,)
 	# from nothing the collection already runs each demo through its release: the fine-tune reads that file
-	$(BIN)/tcot train --config examples/configs/train_libero_v2.yaml --data data/demos_libero_panda.hdf5 --resume \
-		>> runs/libero/train_v2.log 2>&1 || (tail -5 runs/libero/train_v2.log; exit 1)
-	tr '\r' '\n' < runs/libero/train_v2.log | grep -v "it/s\|s/it\|step/s\|s/step\|^\s*$$\|WARNING\|macro" \
-		> docs/libero-planner/train_v2.log
-	cp runs/libero/planner_v2.metrics.jsonl docs/libero-planner/train_v2.metrics.jsonl
-	@$(BIN)/python -c "from tcot_hybrid.learning.train import run_finished; import sys; \
-		sys.exit(0 if run_finished('runs/libero/planner_v2.safetensors') else 3)" \
-		|| (echo "train_libero_v2.yaml stopped at its time cap (max_minutes): make libero-planner again resumes it"; exit 1)
+	$(call libero_train_resumable,train_libero_v2,planner_v2,train_v2,--data data/demos_libero_panda.hdf5)
 	cp runs/libero/planner_v2.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner_v2.json tcot_hybrid/checkpoints/libero_panda_default.json
 endif
@@ -169,7 +168,7 @@ endif
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md
 # names before the run: init states 0-1 of the four suites' 40 tasks, global-only and GLSR. Then the direct baseline
 # on sampled development layouts (seeds 20000-20002 of libero_object; docs/libero-planner.md, "Direct baseline").
-# The shipped checkpoint (demos through the release, 6 switches per plan) in eval-shipped-v2; the folders eval-shipped
+# The shipped checkpoint (fine-tuned on demos through the release) in eval-shipped-v2; the folders eval-shipped
 # (2000-demo checkpoint, GLSR with t_f = 16) and eval-shipped-glsr (same checkpoint, current GLSR defaults) are kept
 # beside it (an episode's key holds its checkpoint's hash: a rerun there evaluates the shipped one and mixes them)
 libero-planner-eval: setup

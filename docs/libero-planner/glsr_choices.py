@@ -19,13 +19,13 @@ did not. Its figures on the shipped init states and under every perturbation are
 """
 from __future__ import annotations
 
-import argparse
 import json
 from collections import defaultdict
 from pathlib import Path
 
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
+
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent.parent
 OUT = HERE / "glsr_choices.json"
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 S4 = ",".join(SUITES)
@@ -49,23 +49,14 @@ RUNS = (
      "tcot eval --suite libero_spatial,libero_object --planners learned --modes glsr "
      "--perturb object_moved,object_drop,offcenter_grasp --init sampled --episodes 1 --seed-start 20000"),
 )
+SETTINGS = {name: setting for name, setting, _ in RUNS}
 KEEP = ("task", "suite", "mode", "seed", "perturb", "success", "stopped_by", "steps", "replans", "empty_grasps",
         "perturbation_fired")
 
 
 def gather() -> None:
-    rows = []
-    for name, setting, cmd in RUNS:
-        p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
-        if not p.is_file():
-            print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
-            continue
-        for line in p.read_text().splitlines():
-            e = json.loads(line)
-            rows.append({"run": name, "setting": "-" if e["mode"] == "global" else setting,
-                         **{k: e.get(k) for k in KEEP}})
-    OUT.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
-    print(f"{len(rows)} episodes -> {OUT.relative_to(ROOT)}")
+    dev_runs.gather(((name, cmd) for name, _, cmd in RUNS), OUT, lambda name, e: {
+        "run": name, "setting": "-" if e["mode"] == "global" else SETTINGS[name], **{k: e.get(k) for k in KEEP}})
 
 
 def frac(k: int, n: int) -> str:
@@ -119,16 +110,7 @@ def lines() -> list[str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--gather", action="store_true", help="read runs/dev/* into glsr_choices.json first")
-    args = ap.parse_args()
-    if args.gather:
-        gather()
-    from tcot_hybrid.markdown import update_readme_section
-
-    text = "\n".join(lines())
-    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, text)
-    print(text)
+    dev_runs.main(__doc__, gather, lines, SECTION)
 
 
 if __name__ == "__main__":

@@ -10,13 +10,13 @@ train_libero_v2.yaml or a variant of it; the RUNS table names the checkpoint, th
 """
 from __future__ import annotations
 
-import argparse
 import json
 from collections import defaultdict
 from pathlib import Path
 
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
+
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent.parent
 OUT = HERE / "release_choices.json"
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 S4 = ",".join(SUITES)
@@ -37,18 +37,8 @@ KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "steps")
 
 
 def gather() -> None:
-    rows = []
-    for name, ck, what, cmd in RUNS:
-        p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
-        if not p.is_file():
-            print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
-            continue
-        for line in p.read_text().splitlines():
-            e = json.loads(line)
-            if e["mode"] == "global" and e["perturb"] == "none":
-                rows.append({"run": name, **{k: e.get(k) for k in KEEP}})
-    OUT.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
-    print(f"{len(rows)} episodes -> {OUT.relative_to(ROOT)}")
+    dev_runs.gather(((name, cmd) for name, _, _, cmd in RUNS), OUT, lambda name, e: (
+        {"run": name, **{k: e.get(k) for k in KEEP}} if e["mode"] == "global" and e["perturb"] == "none" else None))
 
 
 def lines() -> list[str]:
@@ -78,16 +68,7 @@ def lines() -> list[str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--gather", action="store_true", help="read runs/dev/* into release_choices.json first")
-    args = ap.parse_args()
-    if args.gather:
-        gather()
-    from tcot_hybrid.markdown import update_readme_section
-
-    text = "\n".join(lines())
-    update_readme_section(ROOT / "docs" / "libero-planner.md", SECTION, text)
-    print(text)
+    dev_runs.main(__doc__, gather, lines, SECTION)
 
 
 if __name__ == "__main__":
