@@ -1,0 +1,169 @@
+"""The paper's protocol on LIBERO (issue 16): Table 1 (success per suite) and Table 4 (the ablation) of the shipped
+checkpoints on the 50 shipped init states of every task of the four suites, beside the paper's published figures,
+into the <!-- libero-protocol:start/end --> sections of docs/libero-planner.md and README.md, from what
+``make libero-protocol`` wrote: one ``tcot eval`` per row into docs/libero-planner/eval-protocol/ (resumable; each
+run's eval.json is kept as eval-<planner>-<mode>.json for its wall time), then
+
+    .venv/bin/python docs/libero-planner/protocol.py
+
+A row with fewer than 500 episodes in a suite is printed as it stands, marked partial. The paper reports
+± one standard error; the intervals here are Wilson 95 % intervals (wider).
+"""
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+from summarize import SUITES, rate
+
+from tcot_hybrid.markdown import update_readme_section
+from tcot_hybrid.metrics import wilson_interval
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+EVAL = HERE / "eval-protocol"
+ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
+PER_SUITE = 500  # 10 tasks x 50 shipped init states
+# (planner, supervisor mode) per row of ours, in Table 4's order, and how the paper names the row
+ROWS = ((("direct", "global"), "direct baseline (next action every step; the paper's OpenVLA row)"),
+        (("learned", "global"), "global trajectory only"),
+        (("learned", "local"), "local trajectory only"),
+        (("learned", "glsr"), "GLSR (Algorithm 1)"),
+        (("learned", "glsr_reset"), "GLSR, reset-retry variant (the paper's released code)"))
+# The paper's Table 1 (discrete actions, ± s.e.) and Table 2 (continuous actions): spatial, object, goal, long, average
+PAPER = (("OpenVLA (paper Table 1)", (0.847, 0.884, 0.792, 0.537, 0.765)),
+         ("TCoT (paper Table 1)", (0.910, 0.948, 0.788, 0.668, 0.829)),
+         ("TCoT-Multi: one model, four suites (paper Table 1)", (0.900, 0.870, 0.850, 0.710, 0.833)),
+         ("OpenVLA-OFT (paper Table 2)", (0.969, 0.981, 0.955, 0.911, 0.954)),
+         ("TCoT-OFT (paper Table 2)", (0.975, 0.988, 0.950, 0.935, 0.962)))
+# The paper's Table 4 (average success rate, ± s.e.) against our row of the same design
+PAPER_ABLATION = {("direct", "global"): "OpenVLA 0.765 ± .006", ("learned", "global"): "0.786 ± .005",
+                  ("learned", "local"): "0.773 ± .009", ("learned", "glsr"): "0.829 ± .007"}
+
+
+def _read(path: Path) -> list[dict]:
+    return [json.loads(x) for x in path.read_text().splitlines() if x.strip()] if path.is_file() else []
+
+
+def _rows() -> dict[tuple[str, str], list[dict]]:
+    """Episodes per (planner, mode); one checkpoint per row (a folder resumed with another checkpoint would mix two
+    networks in one figure: refused, naming both)."""
+    by: dict = defaultdict(list)
+    for e in _read(EVAL / "episodes.jsonl"):
+        if e["perturb"] == "none":
+            by[(e["planner"], e["mode"])].append(e)
+    for key, eps in by.items():
+        hashes = sorted({e["checkpoint_hash"] for e in eps})
+        if len(hashes) > 1:
+            raise SystemExit(f"{EVAL}: the {key[0]} {key[1]} episodes come from {len(hashes)} checkpoints "
+                             f"({', '.join(map(str, hashes))}); evaluate one checkpoint per folder")
+    return by
+
+
+def _suite_counts(eps: list[dict]) -> dict[str, list[int]]:
+    got: dict = defaultdict(lambda: [0, 0])
+    for e in eps:
+        if e["fault"] and e["success"]:
+            raise SystemExit(f"{e['task']} seed {e['seed']}: a faulted episode is recorded as a success")
+        got[e["suite"]][0] += bool(e["success"])
+        got[e["suite"]][1] += 1
+    return got
+
+
+def _average(got: dict[str, list[int]]) -> str:
+    """The paper's average: the mean of the four suites' rates, with the Wilson interval of the pooled count (the same
+    rate when every suite has as many episodes; a partial row with unequal suites shows the pooled rate, so marked)."""
+    if not all(got[s][1] for s in SUITES):
+        return "-"
+    k = sum(got[s][0] for s in SUITES)
+    n = sum(got[s][1] for s in SUITES)
+    if len({got[s][1] for s in SUITES}) > 1:
+        return f"{rate(k, n)} pooled (suites unequal)"
+    lo, hi = wilson_interval(k, n)
+    return f"**{k / n:.3f}** [{lo:.2f}, {hi:.2f}] n={n}"
+
+
+def _run_time(planner: str, mode: str) -> str | None:
+    p = EVAL / f"eval-{planner}-{mode}.json"
+    if not p.is_file():
+        return None
+    r = json.loads(p.read_text())
+    return (f"{r['ran_now']} episodes in {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
+            + (f" ({r['episodes'] - r['ran_now']} already in the folder)" if r["episodes"] > r["ran_now"] else ""))
+
+
+def table1_lines(by) -> list[str]:
+    lines = ["**Table 1 form: success on the shipped init states** (`make libero-protocol`, "
+             "`docs/libero-planner/eval-protocol/`; ours: success [Wilson 95 % interval] n; the paper's: mean of 500 "
+             "episodes per suite, its ± one standard error is 0.2-1.4 points):", "",
+             "| method | " + " | ".join(SUITES) + " | average |", "|" + "---|" * (len(SUITES) + 2)]
+    for name, figs in PAPER:
+        lines.append(f"| {name} | " + " | ".join(f"{f:.3f}" for f in figs[:-1]) + f" | {figs[-1]:.3f} |")
+    for key, label in ROWS:
+        eps = by.get(key)
+        if not eps:
+            lines.append(f"| ours: {label} | " + " | ".join("not run" for _ in SUITES) + " | - |")
+            continue
+        got = _suite_counts(eps)
+        partial = any(got[s][1] < PER_SUITE for s in SUITES)
+        lines.append(f"| ours: {label}{' (partial)' if partial else ''} | "
+                     + " | ".join(rate(*got[s]) for s in SUITES) + f" | {_average(got)} |")
+    oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
+    if oracle:
+        lines.append("| oracle: privileged script (`docs/eval-libero/oracle-shipped/`) | "
+                     + " | ".join(rate(*oracle[s]) for s in SUITES) + f" | {_average(oracle)} |")
+    lines.append("")
+    glob = by.get(("learned", "global"))
+    if glob and oracle:
+        got = _suite_counts(glob)
+        ratios = [(s, got[s][0] / got[s][1] / (oracle[s][0] / oracle[s][1])) for s in SUITES
+                  if got[s][1] and oracle[s][0]]
+        lines.append("- Global-only as a share of the oracle's success, per suite (the issue's bar: at least 0.80): "
+                     + ", ".join(f"{s} {r:.2f}" for s, r in ratios) + ".")
+    for key, label in ROWS:
+        eps = by.get(key)
+        if not eps:
+            continue
+        how = _run_time(*key)
+        stops = sum(e["stopped_by"] == "detector" and not e["success"] for e in eps)
+        faults = sum(bool(e["fault"]) for e in eps)
+        worst = max(e["max_reference_limit_excess_rad"] for e in eps)
+        lines.append(f"- {label}: {len(eps)} episodes" + (f"; run: {how}" if how else "")
+                     + f"; {faults} faulted (none counted as a success); worst commanded joint-limit excess "
+                       f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
+                                             if key[1].startswith("glsr") else "") + ".")
+    det = EVAL / "eval-learned-glsr.json"
+    if det.is_file():
+        d = json.loads(det.read_text())["detector"].get("learned")
+        if d:
+            lines.append(f"- Failure detector in the GLSR run: AUROC {d['auroc']} over {d['calls']} calls "
+                         f"({d['in_episode_frames']} in-episode frames before success, {d['positives']} after it), "
+                         f"false-alarm rate {d['false_alarm_rate']} (in-episode calls judged done while the task "
+                         f"was not), detection latency {d['detection_latency_steps']} steps.")
+    return lines
+
+
+def table4_lines(by) -> list[str]:
+    lines = ["", "**Table 4 form: the ablation** (average over the four suites, as above):", "",
+             "| row | global | local | GLSR | ours | the paper |", "|---|---|---|---|---|---|"]
+    marks = {("direct", "global"): ("-", "-", "-"), ("learned", "global"): ("✓", "-", "-"),
+             ("learned", "local"): ("-", "✓", "-"), ("learned", "glsr"): ("✓", "✓", "✓"),
+             ("learned", "glsr_reset"): ("✓", "✓", "✓ (reset)")}
+    for key, label in ROWS:
+        eps = by.get(key)
+        ours = _average(_suite_counts(eps)) if eps else "not run"
+        lines.append(f"| {label} | " + " | ".join(marks[key]) + f" | {ours} | {PAPER_ABLATION.get(key, '-')} |")
+    return lines
+
+
+def main() -> None:
+    by = _rows()
+    text = "\n".join(table1_lines(by) + table4_lines(by)) + "\n"
+    for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
+        update_readme_section(target, "libero-protocol", text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
