@@ -66,15 +66,18 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def pick_tasks(per_suite: int | None) -> list[str]:
+def pick_tasks(per_suite: int | None, suites: tuple[str, ...] = SUITES) -> list[str]:
     from tcot_hybrid.libero.tasks import list_libero_tasks
 
+    bad = [s for s in suites if s not in SUITES]
+    if bad:
+        raise SystemExit(f"--suites {bad[0]!r}: choose from {', '.join(SUITES)}")
     by = defaultdict(list)
     for info in list_libero_tasks():
-        if info.suite in SUITES:
+        if info.suite in suites:
             by[info.suite].append(info.name)
     out = []
-    for s in SUITES:
+    for s in suites:
         names = by[s]
         if per_suite is None or per_suite >= len(names):
             out += names
@@ -290,6 +293,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="20000", help="development seeds, e.g. 20000-20001 (10000-49999)")
     ap.add_argument("--tasks-per-suite", type=int, default=None, help="spread over each suite (default: all 10)")
+    ap.add_argument("--suites", default=",".join(SUITES), help="comma-separated suites (default: the four)")
     ap.add_argument("--modes", default=None, help="global,glsr: execute the episodes (default: plans only)")
     ap.add_argument("--plans-only", action="store_true", help="compare t = 0 plans only (the default without --modes)")
     ap.add_argument("--confirm", default="off", help="GLSR: supervisor.confirm_success (off, local_plan, auto)")
@@ -324,7 +328,7 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(int(torch_threads))
-    for task in pick_tasks(a.tasks_per_suite):
+    for task in pick_tasks(a.tasks_per_suite, tuple(x for x in a.suites.split(",") if x)):
         for seed in seeds:
             for mode in modes:
                 want = label({"mode": mode, "confirm": a.confirm,

@@ -32,6 +32,8 @@ RUNS = (
      f"{EVAL} --checkpoint runs/libero/v2b/planner_v2.safetensors"),
     ("v2p6_global", "runs/libero/planner_v2p6", "6 points per piece; demos through the release (both parts)",
      f"{EVAL} --checkpoint runs/libero/planner_v2p6.safetensors"),
+    ("sidehand_global", "runs/libero/planner_v2p6", "the same, hands without a yaw kept continuous along the plan "
+     "(docs/libero-planner.md, \"Side grasps and the wrist\")", f"{EVAL} (the shipped checkpoint)"),
 )
 KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "steps")
 

@@ -211,17 +211,29 @@ def check_outputs(uv_px: np.ndarray, z_m: np.ndarray, grip_prob: np.ndarray, suc
         raise PlanningError(f"planner output success probability {success_prob} is outside [0, 1]")
 
 
+YAW_DEFINED_MIN = 0.5  # closing axis' horizontal length below which a hand has no yaw (within 60 deg of vertical)
+
+
 def canonical_hand(R: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) world TCP orientations, each replaced by the same parallel-jaw grasp turned 180 degrees about its
-    approach axis (x and y columns negated) when its yaw from the home hand lies outside the range the LIBERO oracle
-    keeps, (YAW_MIN - 180, YAW_MIN] degrees (docs/libero-oracle.md: the other half trips joint 7's tracking
-    reflex). The rotation head is trained up to that symmetry, so either of the two may come out."""
-    from tcot_hybrid.libero.grasps import YAW_MIN_RAD
+    """(N, 3, 3) world TCP orientations of one plan, in order, each replaced by the same parallel-jaw grasp turned 180
+    degrees about its approach axis (x and y columns negated) when its yaw from the home hand lies outside the range
+    the LIBERO oracle keeps, (YAW_MIN - 180, YAW_MIN] degrees (docs/libero-oracle.md: the other half trips joint 7's
+    tracking reflex). The rotation head is trained up to that symmetry, so either of the two may come out.
+
+    A hand whose closing axis is near vertical (horizontal part below ``YAW_DEFINED_MIN``: a drawer handle taken from
+    the front) has no yaw; rounding noise decided its turn, and consecutive waypoints asked the wrist for a half turn
+    that IK could not find (docs/libero-planner.md, "Side grasps and the wrist"). Such a hand takes the one of the
+    two whose x axis is nearer the previous waypoint's (the first waypoint: the home hand's, world +x)."""
+    from tcot_hybrid.libero.grasps import R_DOWN, YAW_MIN_RAD
 
     R = np.array(R, dtype=float)
     yaw = np.arctan2(R[:, 0, 1], -R[:, 1, 1])  # yaw_from_home: the closing (y) axis from the home hand's -y
     flip = (yaw > YAW_MIN_RAD) | (yaw <= YAW_MIN_RAD - np.pi)
     R[flip, :, :2] *= -1.0
+    for i in np.flatnonzero(np.hypot(R[:, 0, 1], R[:, 1, 1]) < YAW_DEFINED_MIN):
+        previous_x = R[i - 1, :, 0] if i > 0 else R_DOWN[:, 0]
+        if R[i, :, 0] @ previous_x < 0.0:
+            R[i, :, :2] *= -1.0
     return R
 
 
