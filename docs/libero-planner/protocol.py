@@ -137,10 +137,11 @@ def table1_lines(by) -> list[str]:
     if det.is_file():
         d = json.loads(det.read_text())["detector"].get("learned")
         if d:
-            lines.append(f"- Failure detector in the GLSR run: AUROC {d['auroc']} over {d['calls']} calls "
-                         f"({d['in_episode_frames']} in-episode frames before success, {d['positives']} after it), "
-                         f"false-alarm rate {d['false_alarm_rate']} (in-episode calls judged done while the task "
-                         f"was not), detection latency {d['detection_latency_steps']} steps.")
+            lines.append(f"- Failure detector in the GLSR run: AUROC {d['auroc']} over {d['calls']} frames ("
+                         f"{d['in_episode_frames']} judged while the episodes ran, the rest probes after a success; "
+                         f"{d['positives']} with the task done); false-alarm rate {d['false_alarm_rate']} (successful "
+                         f"episodes in which a probe after the success said not done, of {d['successful_episodes_probed']}"
+                         f"); detection latency {d['detection_latency_steps']} steps.")
     return lines
 
 
