@@ -206,7 +206,7 @@ class MotionExecutor:
                 self.smoother.reset(q, self.sim.qd)
             except TrajectoryError as exc:  # e.g. pushed slightly past a soft joint limit: brake from there
                 self.event("reference_brake", reason=str(exc))
-                self._brake_from_measured(q, self.sim.qd, "resync")
+                self._brake_inside_limits(q, self.sim.qd, "resync")
             self._ik_seed = q
         self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan),
                    corners_added=len(points) - len(plan))
@@ -274,7 +274,8 @@ class MotionExecutor:
             self.smoother.set_target(q)
         except TrajectoryError as exc:  # e.g. retargeted while moving fast toward a joint limit
             self.event("reference_brake", waypoint=i, reason=str(exc))
-            self.smoother.brake()  # stop inside the limits; the waypoint logic moves on from rest
+            ref = self.smoother.reference  # stop inside the limits; the waypoint logic moves on from rest
+            self._brake_inside_limits(ref.q, ref.qd, "retarget", qdd=ref.qdd)
 
     def _advance(self, t: float) -> None:
         if self.phase == "settle":
@@ -394,12 +395,12 @@ class MotionExecutor:
         if limit is not None and err > limit:
             self._tracking_reflex(int(dev.argmax()), float(err), limit)
 
-    def _brake_from_measured(self, q: np.ndarray, qd: np.ndarray, why: str) -> None:
-        """Stop the reference from the measured state, never past a joint limit: a stop from (q, qd) that would
-        leave [q_min, q_max] (a joint moving toward a limit it is near, or already pressed past a soft limit) is
-        replaced by the reference at rest at the measured posture, each joint brought inside its limits, and the
-        event ``reference_stopped_inside_limits`` records by how much (nothing is moved silently)."""
-        info = self.smoother.brake(q, qd)
+    def _brake_inside_limits(self, q: np.ndarray, qd: np.ndarray, why: str, qdd: np.ndarray | None = None) -> None:
+        """Stop the reference from a state (measured, or the reference's own), never past a joint limit: a stop from
+        (q, qd, qdd) that would leave [q_min, q_max] (a joint moving toward a limit it is near, or already pressed
+        past a soft limit) is replaced by the reference at rest at that posture, each joint brought inside its
+        limits, and the event ``reference_stopped_inside_limits`` records by how much (nothing is moved silently)."""
+        info = self.smoother.brake(q, qd, qdd)
         if info.limit_excursion_rad <= 0.0:
             return
         hold = np.minimum(np.maximum(q, self._q_min), self._q_max)
@@ -414,7 +415,7 @@ class MotionExecutor:
         self.tracking_reflexes += 1
         self.event("tracking_reflex", joint=self.sim.robot.arm_joints[joint], error_rad=round(err, 4),
                    limit_rad=limit, waypoint=self.index)
-        self._brake_from_measured(self.sim.q, self.sim.qd, "tracking_reflex")
+        self._brake_inside_limits(self.sim.q, self.sim.qd, "tracking_reflex")
         self._ik_seed = self.sim.q
         self.phase = "done"
         self._arrived_at = self._waiting_at = None  # a replan to the same stop point starts a fresh wait

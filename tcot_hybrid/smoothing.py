@@ -109,15 +109,14 @@ class _Phase(NamedTuple):
 
 
 def _position_bounds(phase: _Phase) -> list[tuple[float, float]]:
-    """Per-joint (min, max) position over a phase [rad].
+    """Per-joint (min, max) position over a phase [rad], computed here from the jerk-constant pieces (brake
+    pre-profile + 7-step profile): extrema lie at piece ends or where the (quadratic) velocity crosses zero.
 
-    Ruckig's ``position_extrema`` is right for the position interface, but with the velocity
-    interface it includes an unset final position (0.0), so there it is computed here from the
-    jerk-constant pieces (brake pre-profile + 7-step profile): extrema lie at piece ends or where
-    the (quadratic) velocity crosses zero.
+    Ruckig's ``position_extrema`` is not used: with the velocity interface it includes an unset final position
+    (0.0), and with the position interface (ruckig 0.19.4) it is short for moves that start while moving: it
+    missed the overshoot of one toward a joint limit (it reported 3.705 rad; the trajectory reached 3.768, past
+    joint 6's 3.7525), so a commanded reference went past the limit (docs/reliability.md, "Findings and fixes").
     """
-    if not phase.velocity_interface:
-        return [(b.min, b.max) for b in phase.trajectory.position_extrema]
     bounds = []
     for prof in phase.trajectory.profiles[0]:
         pieces = []

@@ -421,6 +421,50 @@ def test_velocity_phase_position_bounds_match_dense_sampling():
     assert worst_gap <= 1e-5
 
 
+def test_move_position_bounds_match_dense_sampling_and_catch_an_overshoot_past_a_limit():
+    """Moves (position interface) started while moving: our bounds enclose the sampled trajectory. Ruckig 0.19.4's
+    position_extrema missed the overshoot of one such move on LIBERO (joint 6 heading for its upper limit at
+    1.13 rad/s, target behind it): a retarget that reaches past the limit must be refused, not installed."""
+    from tcot_hybrid.smoothing import _position_bounds
+
+    rng = np.random.default_rng(6)
+    s = make()
+    worst_gap, overshoots = 0.0, 0
+    for _ in range(200):
+        q0 = random_q(rng, margin=0.5)
+        s.reset(q0, rng.uniform(-0.6, 0.6, DOF) * s.v_plan)  # moving (a stop installed), inside the plan limits
+        target = random_q(rng, margin=0.5)
+        try:
+            s.set_target(target)
+        except TrajectoryError:
+            continue
+        for phase in s._phases:
+            bounds = np.array(_position_bounds(phase))
+            ts = np.linspace(0.0, phase.duration, 2001)
+            q = np.array([phase.trajectory.at_time(t)[0] for t in ts])
+            lo, hi = q.min(axis=0), q.max(axis=0)
+            assert np.all(bounds[:, 0] <= lo + 1e-12) and np.all(bounds[:, 1] >= hi - 1e-12)
+            worst_gap = max(worst_gap, float(np.max(lo - bounds[:, 0])), float(np.max(bounds[:, 1] - hi)))
+            ruckig_hi = np.array([b.max for b in phase.trajectory.position_extrema])
+            overshoots += bool(np.any(hi > ruckig_hi + 1e-6))
+    print(f"move bounds vs 2001-point sampling: loosest by {worst_gap:.2e} rad; Ruckig's extrema short in {overshoots}")
+    assert worst_gap <= 1e-5
+    # joint 6 (index 5) heading for its upper limit, the target behind it: the move would pass the limit
+    q0 = np.array([0.0, 0.3, 0.0, -1.5, 0.0, Q_MAX[5] - 0.145, 0.8])
+    qd0 = np.zeros(DOF)
+    qd0[5] = 1.13
+    s.reset(q0, qd0)
+    target = q0.copy()
+    target[5] = Q_MAX[5] - 0.05
+    try:
+        s.set_target(target)
+    except TrajectoryError as exc:
+        assert "joint 5" in str(exc)
+        return
+    refs = run_to_end(s)
+    assert max(r.q[5] for r in refs) <= Q_MAX[5] + 1e-9
+
+
 def test_brake_reports_excursion_when_it_cannot_stop_in_time():
     s = make()
     q0 = Q_MAX - 0.01

@@ -6,7 +6,7 @@ run's eval.json is kept as eval-<planner>-<mode>.json for its wall time), then
 
     .venv/bin/python docs/libero-planner/protocol.py
 
-A row with fewer than 500 episodes in a suite is printed as it stands, marked partial. The paper reports
+A row with fewer than 500 episodes in a suite is printed as it stands, with how many it has. The paper reports
 ± one standard error; the intervals here are Wilson 95 % intervals (wider).
 """
 from __future__ import annotations
@@ -106,8 +106,9 @@ def table1_lines(by) -> list[str]:
             lines.append(f"| ours: {label} | " + " | ".join("not run" for _ in SUITES) + " | - |")
             continue
         got = _suite_counts(eps)
-        partial = any(got[s][1] < PER_SUITE for s in SUITES)
-        lines.append(f"| ours: {label}{' (partial)' if partial else ''} | "
+        ns = [got[s][1] for s in SUITES]
+        partial = f" (so far: {min(ns)}-{max(ns)} of {PER_SUITE} per suite)" if min(ns) < PER_SUITE else ""
+        lines.append(f"| ours: {label}{partial} | "
                      + " | ".join(rate(*got[s]) for s in SUITES) + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
     if oracle:
