@@ -189,9 +189,11 @@ libero-planner-perturb: setup
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
 # tcot eval per row into one folder (resumable); each run's eval.json is kept as eval-<planner>-<mode>.json (its wall
-# time). The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
+# time) and the commit it ran at as eval-<planner>-<mode>.commit. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
 define libero_protocol_row
+	mkdir -p $(PROTOCOL)
+	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(PROTOCOL)/eval-$(1)-$(2).commit
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
 		--seed-start 0 --workers 2 --out $(PROTOCOL)
 	cp $(PROTOCOL)/eval.json $(PROTOCOL)/eval-$(1)-$(2).json

@@ -12,7 +12,7 @@ A row with fewer than 500 episodes in a suite is printed as it stands, with how 
 from __future__ import annotations
 
 import json
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 
 from summarize import SUITES, rate
@@ -84,13 +84,20 @@ def _average(got: dict[str, list[int]]) -> str:
     return f"**{k / n:.3f}** [{lo:.2f}, {hi:.2f}] n={n}"
 
 
-def _run_time(planner: str, mode: str) -> str | None:
+def _provenance(planner: str, mode: str) -> str | None:
+    """How a row's last run went (eval-<planner>-<mode>.json, written when it finished) and the commit it ran at
+    (eval-<planner>-<mode>.commit, written when it started)."""
+    parts = []
     p = EVAL / f"eval-{planner}-{mode}.json"
-    if not p.is_file():
-        return None
-    r = json.loads(p.read_text())
-    return (f"{r['ran_now']} episodes in {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
-            + (f" ({r['episodes'] - r['ran_now']} already in the folder)" if r["episodes"] > r["ran_now"] else ""))
+    if p.is_file():
+        r = json.loads(p.read_text())
+        parts.append(f"{r['ran_now']} episodes in {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
+                     + (f" ({r['episodes'] - r['ran_now']} already in the folder)" if r["episodes"] > r["ran_now"]
+                        else ""))
+    commit = p.with_suffix(".commit")
+    if commit.is_file():
+        parts.append(f"at commit {commit.read_text().strip()}")
+    return ", ".join(parts) or None
 
 
 def table1_lines(by) -> list[str]:
@@ -126,12 +133,14 @@ def table1_lines(by) -> list[str]:
         eps = by.get(key)
         if not eps:
             continue
-        how = _run_time(*key)
+        how = _provenance(*key)
         stops = sum(e["stopped_by"] == "detector" and not e["success"] for e in eps)
-        faults = sum(bool(e["fault"]) for e in eps)
+        faults = Counter(str(e["fault"])[:60] for e in eps if e["fault"])
+        why = ", ".join(f"{k} x{v}" for k, v in faults.most_common())
         worst = max(e["max_reference_limit_excess_rad"] for e in eps)
         lines.append(f"- {label}: {len(eps)} episodes" + (f"; run: {how}" if how else "")
-                     + f"; {faults} faulted (none counted as a success); worst commanded joint-limit excess "
+                     + f"; {sum(faults.values())} faulted" + (f" ({why})" if why else "")
+                     + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
     det = EVAL / "eval-learned-glsr.json"
