@@ -2,7 +2,8 @@
 checkpoints on the 50 shipped init states of every task of the four suites, beside the paper's published figures,
 into the <!-- libero-protocol:start/end --> sections of docs/libero-planner.md and README.md, from what
 ``make libero-protocol`` wrote: one ``tcot eval`` per row into docs/libero-planner/eval-protocol/ (resumable; each
-run's eval.json is kept as eval-<planner>-<mode>.json for its wall time), then
+run's eval.json is kept as eval-<planner>-<mode>.json for its wall time, the commit it ran at as
+eval-<planner>-<mode>.commit; the episodes, trimmed, as records.jsonl), then
 
     .venv/bin/python docs/libero-planner/protocol.py
 
@@ -25,6 +26,9 @@ ROOT = HERE.parent.parent
 EVAL = HERE / "eval-protocol"
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
+RECORD_FIELDS = ("task", "suite", "planner", "mode", "perturb", "seed", "success", "fault", "stopped_by", "steps",
+                 "sim_time_s", "wall_time_s", "replans", "empty_grasps", "max_reference_limit_excess_rad",
+                 "max_joint_limit_violation_rad", "checkpoint_hash", "config_hash")
 # (planner, supervisor mode) per row of ours, in Table 4's order, and how the paper names the row
 ROWS = ((("direct", "global"), "direct baseline (next action every step; the paper's OpenVLA row)"),
         (("learned", "global"), "global trajectory only"),
@@ -46,11 +50,23 @@ def _read(path: Path) -> list[dict]:
     return [json.loads(x) for x in path.read_text().splitlines() if x.strip()] if path.is_file() else []
 
 
+def _records() -> list[dict]:
+    """The episodes, trimmed to the fields these tables use: ``tcot eval``'s episodes.jsonl (every event of every
+    episode, 50 MB a row, kept out of git: it is what a resumed run reads) is rewritten as records.jsonl (committed);
+    without it (a fresh checkout) records.jsonl is read."""
+    full = _read(EVAL / "episodes.jsonl")
+    if not full:
+        return _read(EVAL / "records.jsonl")
+    records = [{k: e.get(k) for k in RECORD_FIELDS} for e in full]
+    (EVAL / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    return records
+
+
 def _rows() -> dict[tuple[str, str], list[dict]]:
     """Episodes per (planner, mode); one checkpoint per row (a folder resumed with another checkpoint would mix two
     networks in one figure: refused, naming both)."""
     by: dict = defaultdict(list)
-    for e in _read(EVAL / "episodes.jsonl"):
+    for e in _records():
         if e["perturb"] == "none":
             by[(e["planner"], e["mode"])].append(e)
     for key, eps in by.items():
