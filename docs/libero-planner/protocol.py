@@ -51,13 +51,20 @@ def _read(path: Path) -> list[dict]:
 
 
 def _records() -> list[dict]:
-    """The episodes, trimmed to the fields these tables use: ``tcot eval``'s episodes.jsonl (every event of every
-    episode, 50 MB a row, kept out of git: it is what a resumed run reads) is rewritten as records.jsonl (committed);
-    without it (a fresh checkout) records.jsonl is read."""
+    """The episodes, trimmed to the fields these tables use. ``tcot eval``'s episodes.jsonl (every event of every
+    episode, 50 MB a row, kept out of git: it is what a resumed run reads) is merged into records.jsonl (committed):
+    an episode in both is taken from episodes.jsonl, and rows only records.jsonl holds (a row run on another machine
+    or before a fresh checkout) are kept."""
+    def key(r: dict) -> tuple:
+        return r["task"], r["planner"], r["mode"], r["perturb"], r["seed"]
+
+    merged = {key(r): r for r in _read(EVAL / "records.jsonl")}
     full = _read(EVAL / "episodes.jsonl")
     if not full:
-        return _read(EVAL / "records.jsonl")
-    records = [{k: e.get(k) for k in RECORD_FIELDS} for e in full]
+        return list(merged.values())
+    merged.update({key(r): r for r in ({k: e.get(k) for k in RECORD_FIELDS} for e in full)})
+    records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
+                                                     r["seed"]))
     (EVAL / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records
 
