@@ -166,6 +166,7 @@ def table1_lines(by) -> list[str]:
                      + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
+    lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
         d = json.loads(det.read_text())["detector"].get("learned")
@@ -191,8 +192,30 @@ def table4_lines(by) -> list[str]:
     return lines
 
 
+def per_task_lines(by) -> list[str]:
+    """Successes of every row per task (k of n shipped init states), for eval-protocol/per_task.md: where a suite's
+    figure is lost. A report of the test set, not a tuning signal (docs/seeds.md)."""
+    oracle = [e for e in _read(ORACLE) if e["perturb"] == "none"]
+    cols = [(label.split(" (")[0], by[key]) for key, label in ROWS if by.get(key)] + [("oracle", oracle)]
+    cells: dict = defaultdict(dict)
+    for name, eps in cols:
+        for e in eps:
+            k, n = cells[e["task"]].get(name, (0, 0))
+            cells[e["task"]][name] = (k + bool(e["success"]), n + 1)
+    lines = ["# Success per task on the shipped init states", "",
+             "Written by `docs/libero-planner/protocol.py` from `records.jsonl` (successes of the episodes run; "
+             "the test set: read, never tuned on).", "",
+             "| suite | task | " + " | ".join(name for name, _ in cols) + " |", "|" + "---|" * (len(cols) + 2)]
+    for task in sorted(cells, key=lambda t: (SUITES.index(t.split(":")[0]), t)):
+        suite, name = task.split(":", 1)
+        lines.append(f"| {suite} | {name} | " + " | ".join(
+            "%d/%d" % cells[task][c] if c in cells[task] else "-" for c, _ in cols) + " |")
+    return lines
+
+
 def main() -> None:
     by = _rows()
+    (EVAL / "per_task.md").write_text("\n".join(per_task_lines(by)) + "\n")
     text = "\n".join(table1_lines(by) + table4_lines(by)) + "\n"
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-protocol", text)
