@@ -222,6 +222,37 @@ class MujocoArmDynamics:
             self._pose_tick = self.tick
         return self._pos_ro, self._rot_ro
 
+    def inverse_torques(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """(N, n) arm torques [Nm] that (N, n) arm states (q, qd, qdd) ask for: M(q) qdd + bias(q, qd) - passive(q, qd),
+        armature included, from MuJoCo's own model of the scene (gravity, rotor armature, and the passive forces the
+        controller feeds forward: damping, springs and the fluid drag of a scene with air, e.g. robosuite's
+        density 1.2, where the Panda gripper's 10 g finger tips with 0.01 kg m^2 inertia act as 2.4 m boxes). On a
+        scratch ``MjData``: everything but the arm stays where it is now and at rest; no contacts."""
+        m = self.model
+        if getattr(self, "_scratch", None) is None:
+            self._scratch = mujoco.MjData(m)
+            self._rne = np.zeros(m.nv)
+        d = self._scratch
+        q, qd, qdd = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, qd, qdd))
+        out = np.empty((q.shape[0], self.n))
+        d.qpos[:] = self.data.qpos
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        armature = m.dof_armature[self.dof_adr]
+        for k in range(q.shape[0]):
+            d.qpos[self.qpos_adr] = q[k]
+            d.qvel[self.dof_adr] = qd[k]
+            d.qacc[self.dof_adr] = qdd[k]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            mujoco.mj_tendon(m, d)
+            mujoco.mj_transmission(m, d)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_passive(m, d)
+            mujoco.mj_rne(m, d, 1, self._rne)
+            out[k] = self._rne[self.dof_adr] + armature * qdd[k] - d.qfrc_passive[self.dof_adr]
+        return out
+
     def write_ctrl(self, tau: np.ndarray) -> None:
         """Write arm torques [Nm] into ``MjData.ctrl`` (for the simulation loop, not for controllers)."""
         if self._asl is not None:

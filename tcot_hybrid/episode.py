@@ -92,7 +92,8 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     px = cfg.scene.planner_image_px
     camera = CameraModel.from_mujoco(sim.model, sim.data, cfg.scene.planner_camera, width=px, height=px)
     dyn = MujocoArmDynamics(sim.model, sim.data, robot, T_base_world=sim.T_base_world)
-    smoother = JointSmoother.from_spec(robot, ctrl_dt=cfg.timing.ctrl_dt, config=cfg.smoothing)
+    smoother = JointSmoother.from_spec(robot, ctrl_dt=cfg.timing.ctrl_dt, config=cfg.smoothing,
+                                       torques=dyn.inverse_torques)
     smoother.reset(sim.q)
     controller = make_controller(cfg.controller, robot, ctrl_dt=cfg.timing.ctrl_dt,
                                  params=cfg.controller_params)

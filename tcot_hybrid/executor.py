@@ -69,6 +69,15 @@ class ExecutorConfig:
                       between points, and a place descent starting 2-3 cm to the side brought a carried cube
                       down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
                       unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
+    hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
+                      is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
+                      the twin is solved from the same seed and taken when it converges where the other missed by
+                      more than ``TWIN_MISS_M``, or moves the arm less without converging less; the waypoints after it
+                      are then asked turned too, until a twin is better again (event ``hand_turned``). Learned plans choose between the two
+                      by the hand's yaw (planners/learned.py ``canonical_hand``), which cannot see the arm: a level
+                      hand reaching for a bottle by the robot's base was solved with joint 7 at its limit and the
+                      next waypoints stopped 8-12 cm short (docs/libero-planner.md, "Air drag and the wrist's half
+                      turn"). False: orientations as planned.
     """
 
     blend_time_s: float = 0.15
@@ -81,6 +90,7 @@ class ExecutorConfig:
     transit_min_horizontal_m: float | None = 0.06
     transit_min_vertical_m: float = 0.02
     switch_min_horizontal_m: float | None = 0.005
+    hand_twin: bool = True
 
     def __post_init__(self) -> None:
         for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s", "transit_min_vertical_m"):
@@ -133,6 +143,24 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     return np.asarray(out_p), np.asarray(out_g, bool)
 
 
+_HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a parallel-jaw hand's twin
+
+
+TWIN_MISS_M = 0.03  # an IK answer this far from the waypoint is a miss the arm cannot make up for [m]
+
+
+def _twin_is_better(twin, other, seed: np.ndarray) -> bool:
+    """The hand's twin solution beats the other: it converged where the other missed the point by more than
+    TWIN_MISS_M; or it moves the arm less from the seed without converging less. (A twin that converges only by a
+    long way round is not taken while the other is near: a wrist half turn under a carried object saturated joints
+    6 and 7 and tripped the tracking reflex where the unconverged answer, 3-17 mm off, still placed it.)"""
+    if twin.converged and not other.converged and other.pos_err > TWIN_MISS_M:
+        return True
+    if other.converged and not twin.converged:
+        return False
+    return float(np.abs(twin.q - seed).sum()) < float(np.abs(other.q - seed).sum())
+
+
 class MotionExecutor:
     """Executes waypoint plans on the simulated robot at ``ctrl_dt``."""
 
@@ -155,6 +183,7 @@ class MotionExecutor:
         self._arrived_at: float | None = None  # when the reference reached the current stop point [s]
         self._waiting_at: np.ndarray | None = None  # that stop point [m]
         self._ik_seed = sim.q
+        self._hand_turned = False  # planned orientations are asked turned half a turn (config.hand_twin)
         self._last_tau = np.zeros(sim.robot.dof)
         self._faulted = False
         self.ik_failures = 0
@@ -256,8 +285,17 @@ class MotionExecutor:
         # Plans live in the world frame; IK solves in the robot's own base frame (identity in the workcell).
         T = self.sim.T_base_world
         target = IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=T[:3, :3] @ self.rots[i])
+        if self._hand_turned:
+            target = IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN)
         try:
             res = self.ik.solve(target, self._ik_seed)
+            if self.config.hand_twin and (not res.converged or res.limit_active):
+                twin = self.ik.solve(IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN), self._ik_seed)
+                if _twin_is_better(twin, res, self._ik_seed):
+                    self._hand_turned = not self._hand_turned
+                    self.event("hand_turned", waypoint=i, turned=self._hand_turned, converged=twin.converged,
+                               other_converged=res.converged, other_limit_active=res.limit_active)
+                    res = twin
         except TcotError as exc:  # bad input: keep holding, report
             self.event("ik_error", waypoint=i, reason=str(exc))
             self.phase = "done"
@@ -323,6 +361,7 @@ class MotionExecutor:
         self.index, self.phase, self.grasp_tcp_z = -1, "idle", None
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
+        self._hand_turned = False
         self.controller.reset(self.dyn, self._last_tau)
         self.event("scene_reset")
 

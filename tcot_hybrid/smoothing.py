@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 import ruckig
@@ -53,12 +53,19 @@ class SmoothingConfig:
     start_tolerance_rad: largest |q_reference - q_measured| accepted by ``check_start`` [rad]
                          (MoveIt uses 0.01). Turn down to refuse plans sooner when tracking is poor;
                          up if a stiff contact keeps the arm slightly off its reference.
+    torque_fraction:     with a torque model (the scene's inverse dynamics): the share of each joint's
+                         tau_max a planned move may ask for; a move that asks more is slowed down (its
+                         limits scaled as a time stretch) until it fits, the rest of tau_max is left to
+                         feedback. Down: slower moves, more margin; up: faster, nearer saturation. Why:
+                         robosuite's air drag on the Panda gripper asks joint 7 for 13 N m of its 12 at
+                         1.3 rad/s (docs/reliability.md, "Findings and fixes"). None: no torque check.
     """
 
     velocity_scale: float = 0.5
     acceleration_scale: float = 0.5
     jerk_scale: float = 0.5
     start_tolerance_rad: float = 0.01
+    torque_fraction: float | None = 0.8
 
     def __post_init__(self) -> None:
         for name in ("velocity_scale", "acceleration_scale", "jerk_scale"):
@@ -67,6 +74,11 @@ class SmoothingConfig:
             if value > 1.0:
                 raise ConfigError(f"{name} must be in (0, 1] (a fraction of the robot's limit), got {value!r}")
         require_positive("start_tolerance_rad", self.start_tolerance_rad)
+        if self.torque_fraction is not None:
+            require_positive("torque_fraction", self.torque_fraction)
+            if self.torque_fraction > 1.0:
+                raise ConfigError(f"torque_fraction must be in (0, 1] (a share of tau_max) or None, got "
+                                  f"{self.torque_fraction!r}")
 
 
 class JointReference(NamedTuple):
@@ -89,6 +101,10 @@ class SegmentInfo(NamedTuple):
     compute_s:           wall time spent computing the segment [s]
     limit_excursion_rad: largest excursion beyond [q_min, q_max] along the segment [rad]; always 0 for
                          set_target (refused otherwise), may be > 0 for brake() from a bad state
+    time_stretch:        set_target with a torque model: how many times slower than the planning limits
+                         allow the move was made so its torques fit (1 = not slowed)
+    torque_ratio:        the move's largest |tau| / (torque_fraction * tau_max) over its samples and joints
+                         (at most 1 unless even the slowest allowed stretch did not fit); 0 without a model
     """
 
     duration_s: float
@@ -98,6 +114,8 @@ class SegmentInfo(NamedTuple):
     result: str
     compute_s: float
     limit_excursion_rad: float
+    time_stretch: float = 1.0
+    torque_ratio: float = 0.0
 
 
 class _Phase(NamedTuple):
@@ -185,6 +203,8 @@ class JointSmoother:
         j_max: np.ndarray,
         ctrl_dt: float,
         config: SmoothingConfig = SmoothingConfig(),
+        tau_max: np.ndarray | None = None,
+        torques: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
     ) -> None:
         if not isinstance(config, SmoothingConfig):
             raise TrajectoryError(f"config must be a SmoothingConfig, got {type(config).__name__}")
@@ -220,15 +240,28 @@ class JointSmoother:
         self.v_plan = _frozen(self.v_max * config.velocity_scale)
         self.a_plan = _frozen(self.a_max * config.acceleration_scale)
         self.j_plan = _frozen(self.j_max * config.jerk_scale)
+        # torque model: torques(q, qd, qdd) -> (N, dof) [Nm] for (N, dof) states (the scene's inverse dynamics)
+        self._torques = torques if config.torque_fraction is not None else None
+        if self._torques is not None:
+            if tau_max is None:
+                raise TrajectoryError("a torque model needs tau_max (one torque limit per joint [N m])")
+            tau = _vector("tau_max", tau_max, dof)
+            bad = np.flatnonzero(~(tau > 0))
+            if bad.size:
+                raise TrajectoryError(f"tau_max[{int(bad[0])}] = {tau[bad[0]]} must be > 0 [N m]")
+            self._tau_budget = _frozen(tau * config.torque_fraction)
         self._otg = ruckig.Ruckig(dof)
         self._phases: list[_Phase] = []
         self._rest: JointReference | None = None  # state held when no phase is active
         self._tick = 0  # ticks since the segment started; time = tick * ctrl_dt (no drift)
 
     @classmethod
-    def from_spec(cls, spec: Any, *, ctrl_dt: float, config: SmoothingConfig = SmoothingConfig()) -> JointSmoother:
-        """Smoother for a robot spec (anything with q_min, q_max, v_max, a_max, j_max arrays)."""
-        return cls(q_min=spec.q_min, q_max=spec.q_max, v_max=spec.v_max, a_max=spec.a_max, j_max=spec.j_max, ctrl_dt=ctrl_dt, config=config)
+    def from_spec(cls, spec: Any, *, ctrl_dt: float, config: SmoothingConfig = SmoothingConfig(),
+                  torques: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> JointSmoother:
+        """Smoother for a robot spec (anything with q_min, q_max, v_max, a_max, j_max and tau_max arrays);
+        ``torques`` is the scene's inverse dynamics (e.g. ``MujocoArmDynamics.inverse_torques``)."""
+        return cls(q_min=spec.q_min, q_max=spec.q_max, v_max=spec.v_max, a_max=spec.a_max, j_max=spec.j_max,
+                   ctrl_dt=ctrl_dt, config=config, tau_max=spec.tau_max, torques=torques)
 
     # -- state ------------------------------------------------------------------------------------------
 
@@ -411,7 +444,36 @@ class JointSmoother:
             state, t0 = brake.end, brake.duration
         brake_s = t0
 
-        inp = self._input(state, self.v_plan, self.a_plan, self.j_plan)
+        candidate, move, synchronized, name = self._move(phases, t0, state, target, target_v, 1.0)
+        stretch, ratio = 1.0, 0.0
+        if self._torques is not None:
+            ratio = self._torque_ratio(move)
+            while ratio > 1.0 and stretch < self.MAX_TIME_STRETCH:
+                # a k-times slower move asks 1/k^2 of the inertial and drag torques (gravity stays): stretch by the
+                # square root of the excess, and again while it does not fit
+                stretch = min(self.MAX_TIME_STRETCH, stretch * math.sqrt(ratio) * 1.02)
+                try:
+                    candidate, move, synchronized, name = self._move(phases, t0, state, target, target_v, stretch)
+                except TrajectoryError:
+                    break  # keep the last move that was computed (a stretched one Ruckig refused, e.g. too slow)
+                ratio = self._torque_ratio(move)
+        self._install(candidate, candidate[-1].end)
+        duration = t0 + move.duration
+        return SegmentInfo(duration, candidate[-1].t0 + candidate[-1].duration, brake_s, synchronized, name,
+                           time.perf_counter() - start, 0.0, stretch, ratio)
+
+    # A move is slowed at most this many times for its torques (joints whose gravity load alone exceeds the budget
+    # cannot be helped by slowing down; the safety layer saturates them as before).
+    MAX_TIME_STRETCH = 4.0
+    TORQUE_SAMPLE_S = 0.02  # spacing of the samples a move's torques are checked at [s]
+    MAX_TORQUE_SAMPLES = 48
+
+    def _move(self, phases: list[_Phase], t0: float, state: JointReference, target: np.ndarray, target_v: np.ndarray,
+              stretch: float) -> tuple[list[_Phase], _Phase, bool, str]:
+        """The move (and stop) phases after ``phases`` with the planning limits scaled as a ``stretch``-times slower
+        motion (v / k, a / k^2, j / k^3); refused (TrajectoryError) when they would leave [q_min, q_max]."""
+        k = stretch
+        inp = self._input(state, self.v_plan / k, self.a_plan / k**2, self.j_plan / k**3)
         inp.target_position = target.tolist()
         inp.target_velocity = target_v.tolist()
         inp.target_acceleration = [0.0] * self.dof
@@ -422,7 +484,8 @@ class JointSmoother:
             move = _Phase(trajectory, t0, trajectory.duration, JointReference(target.copy(), target_v.copy(), np.zeros(self.dof)), False)
             candidate = [*phases, move]
             if np.any(target_v):
-                stop, name = self._stop_phase(move.end, t0 + move.duration, a=self.a_plan, j=self.j_plan, what="stop")
+                stop, name = self._stop_phase(move.end, t0 + move.duration, a=self.a_plan / k**2,
+                                              j=self.j_plan / k**3, what="stop")
                 candidate.append(stop)
             if self._excursion(candidate)[0] <= _LIMIT_TOL or attempt == "unsynchronised":
                 break
@@ -431,9 +494,18 @@ class JointSmoother:
             inp.synchronization = ruckig.Synchronization.No
             synchronized = False
         self._refuse_excursion(candidate, "set_target")
-        self._install(candidate, candidate[-1].end)
-        duration = t0 + move.duration
-        return SegmentInfo(duration, candidate[-1].t0 + candidate[-1].duration, brake_s, synchronized, name, time.perf_counter() - start, 0.0)
+        return candidate, move, synchronized, name
+
+    def _torque_ratio(self, move: _Phase) -> float:
+        """Largest |tau| / budget over the move's samples (every TORQUE_SAMPLE_S, ends included) and joints."""
+        n = int(min(self.MAX_TORQUE_SAMPLES, max(2, math.ceil(move.duration / self.TORQUE_SAMPLE_S) + 1)))
+        states = [move.trajectory.at_time(t) for t in np.linspace(0.0, move.duration, n)]
+        q, qd, qdd = (np.array([s[i] for s in states]) for i in range(3))
+        tau = np.asarray(self._torques(q, qd, qdd), dtype=float)
+        if tau.shape != q.shape or not np.isfinite(tau).all():
+            raise TrajectoryError(f"the torque model returned {tau.shape} (finite: {bool(np.isfinite(tau).all())}) "
+                                  f"for {q.shape} states; expected finite torques of that shape")
+        return float((np.abs(tau) / self._tau_budget).max())
 
     def brake(self, q: np.ndarray | None = None, qd: np.ndarray | None = None, qdd: np.ndarray | None = None) -> SegmentInfo:
         """Fault fallback: stop at zero velocity as fast as the full a_max/j_max allow, then hold.

@@ -260,3 +260,33 @@ def test_split_step_equals_mj_step_with_implicitfast(robot):
         assert d_a.time == d_b.time
     assert contacts > 0, "the comparison must include contacts"
     assert not any(d_a.warning[w].number for w in range(len(d_a.warning)))
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_inverse_torques_match_mujoco_inverse_dynamics_with_air_drag(robot):
+    """M qdd + bias - passive, armature and fluid drag included, equals MuJoCo's own inverse dynamics (constraints off:
+    the planned motion's torques, no contacts); the live MjData is left untouched."""
+    spec = load_robot_spec(robot)
+    m, d = scene(spec)
+    m.opt.density, m.opt.viscosity = 1.2, 2e-5  # robosuite's air: the passive forces include fluid drag
+    dyn = MujocoArmDynamics(m, d, spec)
+    rng = np.random.default_rng(3)
+    n = 6
+    q = rng.uniform(spec.q_min, spec.q_max, (n, dyn.n))
+    qd, qdd = rng.normal(0, 1.0, (n, dyn.n)), rng.normal(0, 3.0, (n, dyn.n))
+    before = d.qpos.copy(), d.qvel.copy()
+    tau = dyn.inverse_torques(q, qd, qdd)
+    np.testing.assert_array_equal(d.qpos, before[0])
+    np.testing.assert_array_equal(d.qvel, before[1])
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    ref = mujoco.MjData(m)
+    drag_seen = 0.0
+    for k in range(n):
+        ref.qpos[:] = d.qpos
+        ref.qvel[:] = 0.0
+        ref.qacc[:] = 0.0
+        ref.qpos[dyn.qpos_adr], ref.qvel[dyn.dof_adr], ref.qacc[dyn.dof_adr] = q[k], qd[k], qdd[k]
+        mujoco.mj_inverse(m, ref)
+        np.testing.assert_allclose(tau[k], ref.qfrc_inverse[dyn.dof_adr], atol=1e-9)
+        drag_seen = max(drag_seen, float(np.abs(ref.qfrc_fluid[dyn.dof_adr]).max()))
+    assert drag_seen > 0.0, "the check covers the fluid drag term"

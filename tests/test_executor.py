@@ -180,3 +180,47 @@ def test_a_reflex_brake_away_from_the_limits_stops_from_the_measured_state():
     ex._tracking_reflex(0, 0.3, 0.25)
     assert not [e for e in ex.events if e["kind"] == "reference_stopped_inside_limits"]
     np.testing.assert_allclose(ex.smoother.reference.q, sim.q)
+
+
+def _turned_hand_run(hand_twin: bool):
+    """The workcell arm asked for its hand 3 cm lower and turned about its approach axis so far that joint 7 would
+    end 0.4 rad past its upper limit; returns (events, planned R, goal, final TCP, final R, joint travel)."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(hand_twin=hand_twin)))
+    r.settle()
+    ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+    q0 = sim.q.copy()
+    turn = sim.robot.q_max[6] - q0[6] + 0.4
+    c, s = np.cos(turn), np.sin(turn)
+    _, R_now = ex.dyn.ee_pose()
+    R = R_now @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # about the TCP's own z
+    goal = sim.tcp_pos() + np.array([0.0, 0.0, -0.03])
+    uv, depth = cam.project(goal[None])
+    plan = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name, kind="local",
+                        tcp_rot=R[None])
+    assert ex.set_plan(plan)
+    for _ in range(400):
+        ex.tick()
+    _, R_end = ex.dyn.ee_pose()
+    assert np.all(sim.q <= sim.robot.q_max) and np.all(sim.q >= sim.robot.q_min)
+    return ex.events, R, goal, sim.tcp_pos().copy(), R_end.copy(), float(np.abs(sim.q - q0).sum())
+
+
+def test_a_hand_past_joint_7s_limit_is_reached_by_its_half_turned_twin():
+    """With ``hand_twin`` the executor solves the same parallel-jaw grasp turned half a turn, reaches the point with
+    the same approach axis and the closing axis the other way round, moves the arm less than IK's way around the
+    limit, and says so (``hand_turned``); without it the planned orientation is asked as it is."""
+    events, R, goal, tcp, R_end, travel = _turned_hand_run(True)
+    turned = [e for e in events if e["kind"] == "hand_turned"]
+    assert len(turned) == 1 and turned[0]["turned"]
+    assert not [e for e in events if e["kind"] == "ik_not_converged"]
+    np.testing.assert_allclose(tcp, goal, atol=0.01)
+    np.testing.assert_allclose(R_end[:, 2], R[:, 2], atol=0.02)  # same approach axis
+    np.testing.assert_allclose(R_end[:, :2], -R[:, :2], atol=0.02)  # closing axis the other way round
+    events_off, _, _, _, R_off, travel_off = _turned_hand_run(False)
+    assert not [e for e in events_off if e["kind"] == "hand_turned"]
+    assert np.abs(R_off[:, :2] - R[:, :2]).max() < 0.02 or [e for e in events_off if e["kind"] == "ik_not_converged"]
+    assert travel < travel_off, "the twin is the shorter way for the arm"

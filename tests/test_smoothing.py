@@ -515,3 +515,80 @@ def test_from_spec_with_shipped_robots(robot):
     q = np.array([r.q for r in refs])
     assert np.all(q <= spec.q_max + TOL) and np.all(q >= spec.q_min - TOL)
     assert np.all(np.abs([r.qd for r in refs]) <= s.v_plan + TOL)
+
+
+def _at(f: float) -> np.ndarray:
+    """Every joint at fraction f of its range."""
+    return Q_MIN + f * (Q_MAX - Q_MIN)
+
+
+def _drag_model(c: float, inertia: float):
+    """A torque model like robosuite's air on the Panda: inertia * qdd + c * qd |qd| per joint [N m]."""
+    calls = []
+
+    def torques(q, qd, qdd):
+        calls.append(len(q))
+        return inertia * qdd + c * qd * np.abs(qd)
+    return torques, calls
+
+
+def test_a_move_that_asks_too_much_torque_is_slowed_until_it_fits():
+    tau_max = np.full(DOF, 12.0)
+    cfg = SmoothingConfig(torque_fraction=0.8)
+    torques, calls = _drag_model(c=7.0, inertia=0.7)
+    fast = make(cfg)  # no model: the time-optimal move
+    slow = make(cfg, tau_max=tau_max, torques=torques)
+    q0, q1 = _at(0.3), _at(0.7)
+    for s in (fast, slow):
+        s.reset(q0)
+    info_fast, info = fast.set_target(q1), slow.set_target(q1)
+    assert calls, "the torque model was asked"
+    assert info.time_stretch > 1.0 and info.torque_ratio <= 1.0 + 1e-9
+    assert info.duration_s > info_fast.duration_s
+    refs = run_to_end(slow)
+    tau = torques(*(np.array([getattr(r, f) for r in refs]) for f in ("q", "qd", "qdd")))
+    # sampled every TORQUE_SAMPLE_S, checked here every tick: within the budget up to the sampling's miss
+    assert np.abs(tau).max() <= 0.8 * 12.0 * 1.02
+    np.testing.assert_allclose(refs[-1].q, q1, atol=TOL)
+    fast_refs = run_to_end(fast)
+    fast_tau = torques(*(np.array([getattr(r, f) for r in fast_refs]) for f in ("q", "qd", "qdd")))
+    assert np.abs(fast_tau).max() > 0.8 * 12.0, "the unslowed move would have asked more than the budget"
+
+
+def test_a_move_within_the_torque_budget_is_not_slowed():
+    torques, _ = _drag_model(c=0.01, inertia=0.01)
+    s = make(tau_max=np.full(DOF, 80.0), torques=torques)
+    ref = make()
+    for x in (s, ref):
+        x.reset(_at(0.4))
+    a, b = s.set_target(_at(0.45)), ref.set_target(_at(0.45))
+    assert a.time_stretch == 1.0 and 0.0 < a.torque_ratio <= 1.0
+    assert a.duration_s == b.duration_s
+
+
+def test_gravity_beyond_the_budget_stops_at_the_largest_stretch():
+    """A load slowing cannot help (static torque over the budget): the move is stretched at most MAX_TIME_STRETCH
+    times and reports that it still does not fit."""
+    s = make(tau_max=np.full(DOF, 10.0), torques=lambda q, qd, qdd: np.full(q.shape, 9.0) + qdd)
+    s.reset(_at(0.4))
+    info = s.set_target(_at(0.5))
+    assert info.time_stretch == pytest.approx(JointSmoother.MAX_TIME_STRETCH)
+    assert info.torque_ratio > 1.0
+
+
+def test_torque_model_misuse_is_refused():
+    with pytest.raises(TrajectoryError, match="tau_max"):
+        make(torques=lambda q, qd, qdd: qdd)
+    with pytest.raises(TrajectoryError, match=r"tau_max\[2\]"):
+        make(torques=lambda q, qd, qdd: qdd, tau_max=[1, 1, 0, 1, 1, 1, 1])
+    s = make(torques=lambda q, qd, qdd: np.full((len(q), 3), 1.0), tau_max=np.full(DOF, 10.0))
+    s.reset(_at(0.4))
+    with pytest.raises(TrajectoryError, match="torque model returned"):
+        s.set_target(_at(0.5))
+    np.testing.assert_array_equal(s.reference.q, _at(0.4)), "a refused call leaves the reference"
+    for bad in (0.0, 1.5, -0.1):
+        with pytest.raises(ConfigError, match="torque_fraction"):
+            SmoothingConfig(torque_fraction=bad)
+    off = make(SmoothingConfig(torque_fraction=None), torques=lambda q, qd, qdd: 1 / 0)
+    off.reset(_at(0.4))
+    assert off.set_target(_at(0.5)).time_stretch == 1.0, "torque_fraction None: no check"

@@ -289,6 +289,9 @@ def perturb_table(folder: str, label: str) -> list[str]:
     names = sorted({p for p, _ in got})
     how = (f"{len(eps)} episodes, {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
            if r and r["ran_now"] == r["episodes"] == len(eps) else f"{len(eps)} episodes, over several runs")
+    commit = HERE / folder / "commit"  # the commit the run was made at, when recorded
+    if commit.is_file():
+        how += f", at commit {commit.read_text().strip()}"
     lines = [f"**Perturbations on LIBERO** (`make libero-planner-perturb` → `docs/libero-planner/{folder}/`; {label}; "
              f"sampled reporting layout{'s' if len(seeds) > 1 else ''} "
              f"{seeds[0]}{f'-{seeds[-1]}' if len(seeds) > 1 else ''}, one per task and family, all 40 tasks; "
