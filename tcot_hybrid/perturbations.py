@@ -130,9 +130,11 @@ def _relocate(runner, name: str, distance: float, rng) -> dict | None:
         if not (x0 <= p[0] <= x1 and y0 <= p[1] <= y1):
             continue
         if all(np.linalg.norm(p - q) >= r + rq + 0.01 for q, rq in others):
-            rest_z = info.rest_z if runner.stack.task.world_kind == "workcell" else old[2]  # LIBERO: same support
-            world.set_pose(name, (p[0], p[1], rest_z + 0.001), float(rng.uniform(-0.3, 0.3)) * (
-                info.kind in ("cube", "cylinder")))
+            if runner.stack.task.world_kind == "workcell":
+                world.set_pose(name, (p[0], p[1], info.rest_z + 0.001), float(rng.uniform(-0.3, 0.3)) * (
+                    info.kind in ("cube", "cylinder")))
+            else:  # LIBERO: translated on the same support, its resting orientation kept (set_pose's pure yaw
+                world.shift(name, (p[0] - old[0], p[1] - old[1], 0.001))  # laid bottles and boxes on their side)
             return {"object": name, "moved_m": np.round(np.append(p - old[:2], 0.0), 4).tolist()}
     return None
 

@@ -40,3 +40,21 @@ def test_object_moved_on_a_joint_task_reports_not_fired_instead_of_crashing():
                     perturb=PerturbConfig(name="object_moved"))
     result = EpisodeRunner(cfg).run()
     assert result["fault"] is None and result["perturbation_fired"] is False
+
+
+def test_object_moved_translates_a_libero_object_and_keeps_it_upright():
+    # set_pose writes a pure yaw, which laid LIBERO's bottles (meshes modelled lying along x) on their side
+    cfg = RunConfig(task="libero_object:pick_up_the_ketchup_and_place_it_in_the_basket", seed=20000, init="sampled",
+                    planner="oracle", perturb=PerturbConfig(name="object_moved"))
+    runner = EpisodeRunner(cfg)
+    runner.settle()
+    world = runner.stack.sim.world
+    rot_before, pos_before = world.rot("ketchup_1"), world.pos("ketchup_1")
+    for step in range(runner.perturbation.at_step + 1):
+        runner._step_once(step, may_plan=step == 0)
+    fired = [e for e in runner.stack.executor.events if e["kind"] == "perturbation"]
+    assert len(fired) == 1 and fired[0]["object"] == "ketchup_1"
+    moved = world.pos("ketchup_1") - pos_before
+    assert np.linalg.norm(moved[:2]) == pytest.approx(0.10, abs=0.02)
+    assert abs(moved[2]) < 0.005  # still standing on the table, not lying on its side
+    assert float(np.trace(rot_before.T @ world.rot("ketchup_1"))) > 2.97  # same orientation (within ~8 degrees)
