@@ -378,6 +378,7 @@ class EpisodeRunner:
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
+            "homes": self.supervisor.homes,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),
             "max_velocity_ratio": float(ex.max_velocity_ratio),

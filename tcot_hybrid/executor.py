@@ -192,10 +192,13 @@ class MotionExecutor:
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
         self.grasp_tcp_z: float | None = None  # TCP height where a plan last closed the gripper [m] (None: open)
+        self.releases = 0  # times a plan opened the gripper at one of its stops (an object put down, a handle let go)
         self.max_joint_limit_violation = 0.0  # measured joint positions past [q_min, q_max] [rad]
         self.max_reference_limit_excess = 0.0  # commanded (reference) positions past them [rad]: should stay 0
         self.max_velocity_ratio = 0.0
         self._q_min, self._q_max, self._v_max = sim.robot.q_min, sim.robot.q_max, sim.robot.v_max
+        self.home_q = sim.q  # the posture the scene starts from (go_home returns there)
+        self._home_targets: list[np.ndarray] = []  # joint targets left on the way home
 
     # --- events -----------------------------------------------------------------------------------
     def event(self, kind: str, **info) -> None:
@@ -316,6 +319,14 @@ class MotionExecutor:
             self._brake_inside_limits(ref.q, ref.qd, "retarget", qdd=ref.qdd)
 
     def _advance(self, t: float) -> None:
+        if self.phase == "home":
+            if self.smoother.done:
+                if self._home_targets:
+                    self._set_target(self._home_targets.pop(0), -1)
+                else:
+                    self.phase = "done"
+                    self.event("home_reached", tcp=[round(float(v), 4) for v in self.sim.tcp_pos()])
+            return
         if self.phase == "settle":
             if t >= self._phase_until:
                 self._next()
@@ -342,6 +353,7 @@ class MotionExecutor:
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
             self.grasp_tcp_z = float(self.sim.tcp_pos()[2]) if self.grip[i] else None
+            self.releases += not self.grip[i]
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
             self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
             self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
@@ -362,8 +374,31 @@ class MotionExecutor:
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
         self._hand_turned = False
+        self._home_targets = []
+        self.releases = 0
         self.controller.reset(self.dyn, self._last_tau)
         self.event("scene_reset")
+
+    def go_home(self, lift_m: float) -> None:
+        """Drop the plan and retreat to ``home_q`` with the hand as it is: first straight up ``lift_m`` from the TCP
+        (IK from the measured posture, the hand's orientation kept; skipped when it does not converge, event
+        ``going_home`` says so), then in joint space to home, so the arm does not sweep low through the scene.
+        ``plan_finished`` turns true on arrival (event ``home_reached``); the next plan starts from home."""
+        self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
+        self.rots = np.zeros((0, 3, 3))
+        self.index, self._arrived_at, self._waiting_at = -1, None, None
+        q = self.sim.q
+        if np.max(np.abs(self.smoother.reference.q - q)) > self.config.resync_tol_rad:  # e.g. after a reflex
+            self.resync_to_measured("going_home")
+        T = self.sim.T_base_world
+        up = self.sim.tcp_pos() + np.array([0.0, 0.0, lift_m])
+        lift = self.ik.solve(IKTarget(pos=T[:3, :3] @ up + T[:3, 3], rot=T[:3, :3] @ self.sim.world.tcp_rot()), q)
+        self._home_targets = ([lift.q] if lift.converged else []) + [self.home_q.copy()]
+        self._hand_turned = False  # home is the nominal hand
+        self._ik_seed = self.home_q.copy()
+        self.phase = "home"
+        self.event("going_home", lift_m=lift_m, lift_converged=bool(lift.converged))
+        self._set_target(self._home_targets.pop(0), -1)
 
     def resync_to_measured(self, reason: str) -> None:
         """The arm was moved from outside (e.g. a perturbed initial posture): restart the reference, the IK seed

@@ -23,6 +23,14 @@ too (a knob turned, a drawer or door pushed with closed fingers: the LIBERO Pand
 as on nothing), and those motions keep low. Non-privileged: the finger joints' measured positions and the TCP
 height from the arm's own kinematics.
 
+A retry from home (``home_retries``): before any plan has released anything, when a global plan has been carried
+out with the hand open and the task is judged not done, or an empty grasp reopened the hand, the arm goes back to the
+posture the episode started from (straight up first) and a new global plan is made from there (reason
+``home_reached``), at most ``home_retries`` times an episode; local plans as above once they are used up or once
+something has been released. The view from home is the one the global prompt was trained on, with the arm out of
+the way; but a global plan starts the task from its beginning, so after a release (the first object of a
+two-object task placed) it would fetch what is already done.
+
 A detector that calls an unfinished task done leaves Algorithm 1 following a finished plan until the time limit
 (LIBERO, a detector trained on demonstrations only: docs/libero-planner.md, "Failure analysis"). With
 ``confirm_success`` the planner's own local prompt must agree: at the local period, a success verdict is checked
@@ -83,6 +91,11 @@ class SupervisorConfig:
     empty_grasp_lift_m: how far above the point where it closed the hand must be for an empty gripper to count as
                        a missed or lost object [m]. Down: reacts sooner after a miss, but may reopen a closed hand
                        that turns a knob or pushes a door; up: later.
+    home_retries:      glsr only: how many times an episode the arm may go home and plan globally again (see the
+                       module doc). 0 (default): Algorithm 1 as written; measured on LIBERO development layouts, where
+                       it is not on by default (docs/libero-planner.md, "Retries from home"). Up: more retries of a
+                       plan that keeps failing, less time left for local recovery.
+    home_lift_m:       how far the hand rises straight up before it turns home [m].
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
                        do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
                        on success frames and on the others). Up: overrules fewer verdicts (more false successes
@@ -103,6 +116,8 @@ class SupervisorConfig:
     empty_grasp_m: float = 0.0025
     empty_grasp_steps: int = 3
     empty_grasp_lift_m: float = 0.04
+    home_retries: int = 0
+    home_lift_m: float = 0.10
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
@@ -112,6 +127,8 @@ class SupervisorConfig:
         require_positive("supervisor.empty_grasp_m", self.empty_grasp_m)
         require_int("supervisor.empty_grasp_steps", self.empty_grasp_steps, minimum=1)
         require_positive("supervisor.empty_grasp_lift_m", self.empty_grasp_lift_m)
+        require_int("supervisor.home_retries", self.home_retries, minimum=0)
+        require_positive("supervisor.home_lift_m", self.home_lift_m)
         if isinstance(self.t_f, str):
             require_choice("supervisor.t_f", self.t_f, T_F_WORDS)
         else:
@@ -150,6 +167,9 @@ class Supervisor:
                                                                   and world_kind == "libero")
         self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
         self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
+        self.home_retries_left = config.home_retries if config.mode == "glsr" else 0
+        self.homes = 0
+        self._global_from = 0  # step of the global plan being followed: t_f counts from it
         self.empty_grasps = 0
         self.overruled = 0
         self.t_f = resolve_t_f(config.t_f, world_kind)  # None: the global phase lasts as long as its plan
@@ -184,15 +204,22 @@ class Supervisor:
             if step % cfg.t_l == 0:
                 return self._plan(step, "local", "period", executor)
             return Decision(None, False, None)
+        if self.state == "homing":
+            if not executor.plan_finished:
+                return Decision(None, False, None)
+            self.state, self._global_from = "global_follow", step
+            return self._plan(step, "global", "home_reached", executor)
         opening = self._empty_grasp_opening(executor) if self.check_empty_grasp else None
         if opening is not None:  # before any observation of this step
             executor.open_empty_gripper(opening)
             self.empty_grasps += 1
+            if self._may_go_home(executor):
+                return self._go_home(step, "grasp_empty", executor, opening_m=round(opening, 5))
             self.state = "local_follow"
             d = self._plan(step, "local", "grasp_empty", executor)
             return Decision(d.plan_mode, False, {**d.event, "opening_m": round(opening, 5)})
         geometric = self._geometric_reason(executor) if cfg.geometric_checks else None
-        frozen = (self.state == "global_follow" and (self.t_f is None or step <= self.t_f)
+        frozen = (self.state == "global_follow" and (self.t_f is None or step - self._global_from <= self.t_f)
                   and not executor.plan_finished)
         if frozen and geometric is None:
             return Decision(None, False, None)
@@ -216,6 +243,8 @@ class Supervisor:
                 self.resets += 1
                 self.state = "reset"
                 return Decision("local", True, self._event(step, p=p, reason=reason, plan="reset+local"))
+            if self._may_go_home(executor) and self._global_plan_ran_out_open(executor):
+                return self._go_home(step, reason, executor, p_success=round(float(p), 4))
             self.state = "local_follow"
             d = self._plan(step, "local", reason, executor)
             return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
@@ -224,8 +253,10 @@ class Supervisor:
     def in_global_phase(self, step: int, executor) -> bool:
         """Before failure detection starts (``--stop-on detector`` asks from then on): step < t_f, or with t_f "plan"
         while the first global plan is still being carried out (a local-only run has no global phase)."""
+        if self.state == "homing":
+            return True
         if self.t_f is not None:
-            return step < self.t_f
+            return step - self._global_from < self.t_f
         return self.state == "global_follow" and not executor.plan_finished
 
     def detect(self, observe) -> tuple[float, str | None]:
@@ -245,6 +276,25 @@ class Supervisor:
         if not (0.0 <= p <= 1.0):  # also catches NaN
             return 0.0, f"success probability {p!r} outside [0, 1]"
         return p, None
+
+    def _go_home(self, step, reason, executor, **info) -> Decision:
+        """Send the arm home; the global plan follows on arrival (``decide`` in state "homing")."""
+        self.home_retries_left -= 1
+        self.homes += 1
+        self.state = "homing"
+        executor.go_home(self.cfg.home_lift_m)
+        return Decision(None, False, {**self._event(step, reason=reason, plan="home"), **info})
+
+    def _may_go_home(self, executor) -> bool:
+        """A retry from home is left and no plan has released anything yet (the task is still at its start)."""
+        return self.home_retries_left > 0 and executor.releases == 0
+
+    @staticmethod
+    def _global_plan_ran_out_open(executor) -> bool:
+        """The executor has carried a global plan out and the hand is open: nothing in hand, nothing left to do."""
+        plan = executor.plan
+        return (executor.plan_finished and plan is not None and plan.kind == "global"
+                and not executor.sim.gripper_closed_cmd())
 
     def _plan(self, step, mode, reason, executor) -> Decision:
         self.replans += step > 0

@@ -224,3 +224,40 @@ def test_a_hand_past_joint_7s_limit_is_reached_by_its_half_turned_twin():
     assert not [e for e in events_off if e["kind"] == "hand_turned"]
     assert np.abs(R_off[:, :2] - R[:, :2]).max() < 0.02 or [e for e in events_off if e["kind"] == "ik_not_converged"]
     assert travel < travel_off, "the twin is the shorter way for the arm"
+
+
+def test_go_home_rises_straight_up_then_returns_to_the_starting_posture():
+    """go_home drops the plan, lifts the hand straight up by lift_m (orientation kept), then moves in joint space to the
+    posture the scene started from; plan_finished turns true there (event home_reached)."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0))
+    r.settle()
+    ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+    home = ex.home_q.copy()
+    away = sim.tcp_pos() + np.array([0.10, -0.08, -0.12])
+    uv, depth = cam.project(away[None])
+    assert ex.set_plan(WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name,
+                                    kind="local"))
+    for _ in range(600):
+        ex.tick()
+        if ex.plan_finished:
+            break
+    start = sim.tcp_pos().copy()
+    assert np.linalg.norm(start - away) < 0.02 and np.abs(sim.q - home).max() > 0.1
+    ex.go_home(0.10)
+    assert ex.plan is None and not ex.plan_finished
+    assert ex.events[-1]["kind"] == "going_home" and ex.events[-1]["lift_converged"]
+    path = []
+    for _ in range(2000):
+        ex.tick()
+        path.append(sim.tcp_pos().copy())
+        if ex.plan_finished:
+            break
+    assert ex.plan_finished and ex.events[-1]["kind"] == "home_reached"
+    np.testing.assert_allclose(sim.q, home, atol=0.02)
+    path = np.array(path)
+    top = int(np.argmax(path[:, 2] > start[2] + 0.09))  # first tick 9 cm above where it started
+    assert top > 0 and np.linalg.norm(path[:top, :2] - start[:2], axis=1).max() < 0.02  # straight up first

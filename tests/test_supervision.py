@@ -27,6 +27,7 @@ class FakePlanner:
 class FakeExecutor:
     ik_failures = 0
     plan_finished = False
+    plan = None
 
 
 def decisions(cfg, p, steps):
@@ -332,3 +333,103 @@ def test_an_empty_hand_that_keeps_low_is_left_alone_and_a_lost_object_is_noticed
     assert reopenings((0.90, 0.91)) == []  # 1 cm up: a push or a turn
     assert reopenings((0.90, 0.95)) == [4]  # lifted 5 cm from step 2: steps 2, 3, 4
     assert reopenings((0.90, 0.95), openings=(0.004,)) == []  # lifted, holding 4 mm: a held object
+
+
+class HomingExecutor(GripperExecutor):
+    """A gripper executor that can go home: it takes ``home_steps`` planner steps to get there."""
+
+    def __init__(self, openings, home_steps=3):
+        super().__init__(openings)
+        self.home_steps, self.homing_since, self.homes = home_steps, None, []
+        self.plan = type("Plan", (), {"kind": "global"})()
+        self.done_at = None  # step from which the current plan counts as carried out (None: never)
+        self.releases = 0
+
+    @property
+    def plan_finished(self):
+        if self.homing_since is not None:
+            return self.sim.t >= self.homing_since + self.home_steps
+        return self.done_at is not None and self.sim.t >= self.done_at
+
+    def go_home(self, lift_m):
+        self.homes.append((self.sim.t, lift_m))
+        self.homing_since, self.plan = self.sim.t, None
+
+
+def drive(sup, ex, steps, on_plan=None):
+    planned = []
+    for t in range(steps):
+        ex.sim.t = t
+        d = sup.decide(t, observe=lambda: None, executor=ex)
+        if d.event and d.event.get("plan") == "home":
+            planned.append((t, "home", d.event["reason"]))
+        if d.plan_mode:
+            planned.append((t, d.plan_mode, d.event["reason"]))
+            if on_plan:
+                on_plan(t, d.plan_mode)
+    return planned
+
+
+def test_an_empty_grasp_with_a_home_retry_goes_home_and_plans_globally_from_there():
+    """With home_retries 1 the first empty grasp sends the arm home; nothing is planned on the way; on arrival a new
+    global plan (reason home_reached) is followed frozen; the second empty grasp, retries used up, replans locally."""
+    cfg = SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on", empty_grasp_steps=3, confirm_success="off",
+                           home_retries=1, home_lift_m=0.08)
+    ex = HomingExecutor([0.04, 0.01, 0.01, 0.0012])
+    sup = Supervisor(cfg, FakePlanner(0.1), world_kind="workcell")
+
+    def adopt(t, mode):  # the new global plan closes on nothing again from step 11 (its fingers at 1.2 mm)
+        if mode == "global" and t > 0:
+            ex.homing_since, ex.sim.closed = None, True
+            ex.plan = type("Plan", (), {"kind": "global"})()
+            ex.sim.openings = [0.04] * 11 + [0.0012]
+    planned = drive(sup, ex, 16, adopt)
+    assert planned == [(0, "global", "start"), (5, "home", "grasp_empty"), (8, "global", "home_reached"),
+                       (13, "local", "grasp_empty")]
+    assert ex.homes == [(5, 0.08)] and ex.opened == [0.0012, 0.0012] and sup.homes == 1
+
+
+def test_a_global_plan_carried_out_with_an_open_hand_and_the_task_not_done_is_retried_from_home():
+    cfg = SupervisorConfig(mode="glsr", t_f="plan", t_l=4, empty_grasp="off", confirm_success="off",
+                           home_retries=1)
+    ex = HomingExecutor([0.04])
+    ex.sim.closed, ex.done_at = False, 6  # released, plan carried out at step 6
+    sup = Supervisor(cfg, FakePlanner(0.1))
+    planned = drive(sup, ex, 20, lambda t, m: setattr(ex, "homing_since", None) if t > 0 else None)
+    # detection from step 6, the failure acted on at the local period (8): home; arrived at 11; then the new global
+    # plan (kind "global", done at once here) ran out again: retries used up, local plans every t_l
+    assert planned[:3] == [(0, "global", "start"), (8, "home", "not_successful"), (11, "global", "home_reached")]
+    assert all(m == "local" for _, m, _ in planned[3:]) and planned[3][0] == 12
+
+
+def test_a_global_plan_that_ends_holding_something_is_not_sent_home():
+    cfg = SupervisorConfig(mode="glsr", t_f="plan", t_l=4, empty_grasp="off", confirm_success="off",
+                           home_retries=1)
+    ex = HomingExecutor([0.02])  # closed on an object
+    ex.done_at = 6
+    planned = drive(Supervisor(cfg, FakePlanner(0.1)), ex, 10)
+    assert planned == [(0, "global", "start"), (8, "local", "not_successful")] and ex.homes == []
+
+
+@pytest.mark.parametrize("mode, retries", [("glsr", 2), ("glsr_reset", 0), ("local", 0), ("global", 0)])
+def test_home_retries_are_off_by_default_and_belong_to_glsr_only(mode, retries):
+    assert Supervisor(SupervisorConfig(mode=mode), FakePlanner(0.1), world_kind="libero").home_retries_left == 0
+    sup = Supervisor(SupervisorConfig(mode=mode, home_retries=2), FakePlanner(0.1), world_kind="libero")
+    assert sup.home_retries_left == retries
+
+
+def test_no_retry_from_home_once_a_plan_has_released_something():
+    """A global plan starts the task over: after a release (a first object placed) an empty grasp replans locally."""
+    cfg = SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on", empty_grasp_steps=3, confirm_success="off",
+                           home_retries=1)
+    ex = HomingExecutor([0.04, 0.01, 0.01, 0.0012])
+    ex.releases = 1
+    planned = drive(Supervisor(cfg, FakePlanner(0.1)), ex, 8)
+    assert planned == [(0, "global", "start"), (5, "local", "grasp_empty")] and ex.homes == []
+
+
+@pytest.mark.parametrize("kw", [dict(home_retries=-1), dict(home_retries="often"), dict(home_lift_m=0.0)])
+def test_bad_home_retry_settings(kw):
+    with pytest.raises(ConfigError) as e:
+        SupervisorConfig(**kw)
+    assert "supervisor.home_" in str(e.value)
