@@ -49,6 +49,7 @@ SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
 CONFIRM_SUCCESS = ("auto", "off", "local_plan")
 EMPTY_GRASP = ("auto", "on", "off")
 T_F_WORDS = ("auto", "plan")
+HOME_RETRIES_LIBERO = 1  # supervisor.home_retries "auto" on LIBERO (docs/libero-planner.md, "Retries from home")
 T_F_WORKCELL = 16  # steps: docs/glsr.md, "Choosing t_f"
 
 
@@ -92,9 +93,10 @@ class SupervisorConfig:
                        a missed or lost object [m]. Down: reacts sooner after a miss, but may reopen a closed hand
                        that turns a knob or pushes a door; up: later.
     home_retries:      glsr only: how many times an episode the arm may go home and plan globally again (see the
-                       module doc). 0 (default): Algorithm 1 as written; measured on LIBERO development layouts, where
-                       it is not on by default (docs/libero-planner.md, "Retries from home"). Up: more retries of a
-                       plan that keeps failing, less time left for local recovery.
+                       module doc), or "auto": HOME_RETRIES_LIBERO on LIBERO (by measurement on development layouts:
+                       docs/libero-planner.md, "Retries from home"), 0 on the workcell (its reporting tables were
+                       measured without it). 0: Algorithm 1 as written. Up: more retries of a plan that keeps failing,
+                       less time left for local recovery.
     home_lift_m:       how far the hand rises straight up before it turns home [m].
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
                        do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
@@ -116,7 +118,7 @@ class SupervisorConfig:
     empty_grasp_m: float = 0.0025
     empty_grasp_steps: int = 3
     empty_grasp_lift_m: float = 0.04
-    home_retries: int = 0
+    home_retries: int | Literal["auto"] = "auto"
     home_lift_m: float = 0.10
 
     def __post_init__(self) -> None:
@@ -127,7 +129,10 @@ class SupervisorConfig:
         require_positive("supervisor.empty_grasp_m", self.empty_grasp_m)
         require_int("supervisor.empty_grasp_steps", self.empty_grasp_steps, minimum=1)
         require_positive("supervisor.empty_grasp_lift_m", self.empty_grasp_lift_m)
-        require_int("supervisor.home_retries", self.home_retries, minimum=0)
+        if isinstance(self.home_retries, str):
+            require_choice("supervisor.home_retries", self.home_retries, ("auto",))
+        else:
+            require_int("supervisor.home_retries", self.home_retries, minimum=0)
         require_positive("supervisor.home_lift_m", self.home_lift_m)
         if isinstance(self.t_f, str):
             require_choice("supervisor.t_f", self.t_f, T_F_WORDS)
@@ -167,7 +172,10 @@ class Supervisor:
                                                                   and world_kind == "libero")
         self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
         self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
-        self.home_retries_left = config.home_retries if config.mode == "glsr" else 0
+        retries = config.home_retries
+        if retries == "auto":
+            retries = HOME_RETRIES_LIBERO if world_kind == "libero" else 0
+        self.home_retries_left = retries if config.mode == "glsr" else 0
         self.homes = 0
         self._global_from = 0  # step of the global plan being followed: t_f counts from it
         self.empty_grasps = 0

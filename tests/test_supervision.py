@@ -28,6 +28,7 @@ class FakeExecutor:
     ik_failures = 0
     plan_finished = False
     plan = None
+    releases = 0
 
 
 def decisions(cfg, p, steps):
@@ -278,7 +279,7 @@ def test_an_empty_grasp_reopens_the_gripper_and_replans_locally_at_once(world, s
     """Fingers that met (opening below empty_grasp_m for empty_grasp_steps steps) inside the frozen global phase:
     the gripper opens and a local plan follows, before the detector is asked (the hand is observed open)."""
     cfg = SupervisorConfig(mode="glsr", t_f="plan", empty_grasp=setting, empty_grasp_m=0.0025, empty_grasp_steps=3,
-                           confirm_success="off")
+                           confirm_success="off", home_retries=0)
     # closing: 40 mm, 10 mm, then 1.2 mm from step 3 on (nothing between the fingers)
     ex = GripperExecutor([0.04, 0.01, 0.01, 0.0012])
     sup = Supervisor(cfg, FakePlanner(0.1), world_kind=world)
@@ -411,11 +412,15 @@ def test_a_global_plan_that_ends_holding_something_is_not_sent_home():
     assert planned == [(0, "global", "start"), (8, "local", "not_successful")] and ex.homes == []
 
 
-@pytest.mark.parametrize("mode, retries", [("glsr", 2), ("glsr_reset", 0), ("local", 0), ("global", 0)])
-def test_home_retries_are_off_by_default_and_belong_to_glsr_only(mode, retries):
-    assert Supervisor(SupervisorConfig(mode=mode), FakePlanner(0.1), world_kind="libero").home_retries_left == 0
-    sup = Supervisor(SupervisorConfig(mode=mode, home_retries=2), FakePlanner(0.1), world_kind="libero")
-    assert sup.home_retries_left == retries
+@pytest.mark.parametrize("mode, world, retries", [("glsr", "libero", "HOME_RETRIES_LIBERO"), ("glsr", "workcell", 0),
+                                                  ("glsr_reset", "libero", 0), ("local", "libero", 0)])
+def test_home_retries_auto_is_a_libero_default_of_glsr_only(mode, world, retries):
+    from tcot_hybrid import supervision
+
+    sup = Supervisor(SupervisorConfig(mode=mode), FakePlanner(0.1), world_kind=world)
+    assert sup.home_retries_left == (getattr(supervision, retries) if isinstance(retries, str) else retries)
+    sup = Supervisor(SupervisorConfig(mode=mode, home_retries=2), FakePlanner(0.1), world_kind=world)
+    assert sup.home_retries_left == (2 if mode == "glsr" else 0)
 
 
 def test_no_retry_from_home_once_a_plan_has_released_something():

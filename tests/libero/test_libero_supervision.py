@@ -12,8 +12,12 @@ from tcot_hybrid.supervision import SupervisorConfig  # noqa: E402
 BOWL = "libero_spatial:pick_up_the_black_bowl_next_to_the_ramekin_and_place_it_on_the_plate"
 
 
-def test_an_object_dropped_in_transport_reopens_the_gripper_and_is_picked_up_again():
-    cfg = RunConfig(task=BOWL, seed=2100, init="sampled", planner="oracle", supervisor=SupervisorConfig(mode="glsr"),
+@pytest.mark.parametrize("home_retries, then", [(0, "local"), ("auto", "home")])
+def test_an_object_dropped_in_transport_reopens_the_gripper_and_is_picked_up_again(home_retries, then):
+    """Algorithm 1 with the empty-grasp check replans locally from the open hand; with LIBERO's retry from home
+    ("auto") the arm first goes home and a new global plan picks the bowl up from where it fell."""
+    cfg = RunConfig(task=BOWL, seed=2100, init="sampled", planner="oracle",
+                    supervisor=SupervisorConfig(mode="glsr", home_retries=home_retries),
                     perturb=PerturbConfig(name="object_drop"))
     result = EpisodeRunner(cfg).run()
     ev = result["events"]
@@ -22,7 +26,13 @@ def test_an_object_dropped_in_transport_reopens_the_gripper_and_is_picked_up_aga
     replans = [e for e in ev if e["kind"] == "supervisor" and e.get("reason") == "grasp_empty"]
     assert result["perturbation_fired"] and drop
     assert reopened and reopened[0]["t"] > drop[0]["t"] and reopened[0]["opening_m"] < 0.0025
-    assert replans and replans[0]["plan"] == "local" and result["empty_grasps"] >= 1
+    assert replans and replans[0]["plan"] == then and result["empty_grasps"] >= 1
+    assert result["homes"] == (then == "home")
+    if then == "home":
+        kinds = [e["kind"] for e in ev if e["t"] >= reopened[0]["t"]]
+        assert kinds.index("going_home") < kinds.index("home_reached")
+        after = [e for e in ev if e["kind"] == "supervisor" and e.get("reason") == "home_reached"]
+        assert after and after[0]["plan"] == "global"
     assert result["success"] and result["fault"] is None
 
 
