@@ -366,11 +366,16 @@ class MotionExecutor:
         else:
             self.phase = "done"
 
-    def reset_after_scene_reset(self) -> None:
-        """The simulator was reset (arm at home): drop the plan and restart the reference there."""
+    def _drop_plan(self) -> None:
+        """Forget the current plan and its waypoints (no waypoint active)."""
         self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
         self.rots = np.zeros((0, 3, 3))
-        self.index, self.phase, self.grasp_tcp_z = -1, "idle", None
+        self.index = -1
+
+    def reset_after_scene_reset(self) -> None:
+        """The simulator was reset (arm at home): drop the plan and restart the reference there."""
+        self._drop_plan()
+        self.phase, self.grasp_tcp_z = "idle", None
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
         self._hand_turned = False
@@ -384,9 +389,8 @@ class MotionExecutor:
         (IK from the measured posture, the hand's orientation kept; skipped when it does not converge, event
         ``going_home`` says so), then in joint space to home, so the arm does not sweep low through the scene.
         ``plan_finished`` turns true on arrival (event ``home_reached``); the next plan starts from home."""
-        self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
-        self.rots = np.zeros((0, 3, 3))
-        self.index, self._arrived_at, self._waiting_at = -1, None, None
+        self._drop_plan()
+        self._arrived_at = self._waiting_at = None
         q = self.sim.q
         if np.max(np.abs(self.smoother.reference.q - q)) > self.config.resync_tol_rad:  # e.g. after a reflex
             self.resync_to_measured("going_home")

@@ -28,6 +28,12 @@ def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict]
     print(f"{len(rows)} episodes -> {out.relative_to(ROOT)}")
 
 
+def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) -> list[str]:
+    """The docs section's closing list: each (run directory under runs/dev, command) that ``script --gather`` reads."""
+    return (["", f"Commands (each with `--workers {workers} --out runs/dev/<run>`; `{script} --gather` reads them):", ""]
+            + [f"- `{name}`: `{cmd}`" for name, cmd in runs])
+
+
 def main(doc: str, gather_runs: Callable[[], None], lines: Callable[[], list[str]], section: str) -> None:
     """``--gather`` runs ``gather_runs`` first; then ``lines()`` replaces ``section`` in docs/libero-planner.md."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)

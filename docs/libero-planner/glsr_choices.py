@@ -104,8 +104,7 @@ def lines() -> list[str]:
                             + (f" ({eg / len(sel):.1f})" if sel and "no empty-grasp" not in setting
                                and mode == "glsr" else ""))
             out.append(f"| {mode} | {setting} | " + " | ".join(cols) + " |")
-    out += ["", "Commands (each with `--workers 2 --out runs/dev/<run>`; `glsr_choices.py --gather` reads them):", ""]
-    out += [f"- `{name}`: `{cmd}`" for name, _, cmd in RUNS]
+    out += dev_runs.command_lines("glsr_choices.py", 2, ((name, cmd) for name, _, cmd in RUNS))
     return out
 
 

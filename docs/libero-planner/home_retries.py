@@ -73,8 +73,7 @@ def lines() -> list[str]:
             what = "no perturbation" if f == "none" else f
             out.append(f"- {n} retr{'y' if n == 1 else 'ies'} against 0, {what}, the same {len(paired)} layouts: won "
                        f"{sum(b and not a for a, b in paired)}, lost {sum(a and not b for a, b in paired)}.")
-    out += ["", "Commands (each with `--workers 1 --out runs/dev/<run>`; `home_retries.py --gather` reads them):", ""]
-    out += [f"- `{name}`: `{cmd}`" for name, _, cmd in RUNS]
+    out += dev_runs.command_lines("home_retries.py", 1, ((name, cmd) for name, _, cmd in RUNS))
     return out
 
 

@@ -64,8 +64,7 @@ def lines() -> list[str]:
                                               f"{sum(a and not b for a, b in paired)}")
         out.append(f"| `{ck}` | {what} | " + " | ".join(per)
                    + f" | {sum(e['success'] for e in eps)}/{len(eps)} | {wl} |")
-    out += ["", "Commands (each with `--workers 2 --out runs/dev/<run>`; `release_choices.py --gather` reads them):", ""]
-    out += [f"- `{name}`: `{cmd}`" for name, _, _, cmd in RUNS]
+    out += dev_runs.command_lines("release_choices.py", 2, ((name, cmd) for name, _, _, cmd in RUNS))
     return out
 
 
