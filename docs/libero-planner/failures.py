@@ -167,7 +167,8 @@ def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_o
     cfg = RunConfig(task=task, seed=seed, init="sampled", planner="learned", stop_on=stop_on,
                     supervisor=SupervisorConfig(mode=mode or "global", confirm_success=confirm))
     info: dict = {"task": task, "suite": task.split(":")[0], "seed": seed, "mode": mode,
-                  "confirm": confirm if mode and mode.startswith("glsr") else None}
+                  "confirm": confirm if mode and mode.startswith("glsr") else None,
+                  "checkpoint_hash": shipped_checkpoint_hash()}
     held: dict[str, bool] = {}
     t0 = time.perf_counter()
 
@@ -278,7 +279,15 @@ def classify(info: dict) -> str | None:
 
 
 def key(r: dict) -> tuple:
-    return (r["task"], r["seed"], label(r))
+    return (r["task"], r["seed"], label(r), r.get("checkpoint_hash"))
+
+
+def shipped_checkpoint_hash() -> str:
+    """Hash of the checkpoint ``--planner learned`` loads on LIBERO (records are kept per checkpoint)."""
+    from tcot_hybrid.episode import file_digest
+    from tcot_hybrid.learning.checkpoint import default_checkpoint
+
+    return file_digest(default_checkpoint("libero_panda"))
 
 
 def label(r: dict) -> str | None:
@@ -328,12 +337,13 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(int(torch_threads))
+    ckpt = shipped_checkpoint_hash()
     for task in pick_tasks(a.tasks_per_suite, tuple(x for x in a.suites.split(",") if x)):
         for seed in seeds:
             for mode in modes:
                 want = label({"mode": mode, "confirm": a.confirm,
                               "stop_on": ("either" if a.stop_on == "auto" else a.stop_on)})
-                if (task, seed, want) in have:
+                if (task, seed, want, ckpt) in have:
                     continue
                 r = run_one(task, seed, mode, a.confirm, a.stop_on)
                 with out.open("a") as f:
@@ -386,9 +396,13 @@ def summarize(path: Path) -> None:
     from tcot_hybrid.markdown import update_readme_section
 
     recs = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+    ckpt = shipped_checkpoint_hash()
+    older = sum(r.get("checkpoint_hash") != ckpt for r in recs)  # earlier checkpoints' records: kept, not shown
+    recs = [r for r in recs if r.get("checkpoint_hash") == ckpt]
     plans = [r for r in recs if r["mode"] is None]
     eps = [r for r in recs if r["mode"] is not None]
-    lines = []
+    lines = [f"Shipped checkpoint {ckpt} (`tcot_hybrid/checkpoints/libero_panda_default.safetensors`, sha256 prefix); "
+             f"{older} records of earlier checkpoints in `{path.relative_to(HERE.parent.parent)}` are not shown.", ""]
     def seeds_of(rs):
         ss = sorted({r["seed"] for r in rs})
         return f"{ss[0]}-{ss[-1]}" if ss[0] != ss[-1] else f"{ss[0]}"
@@ -440,7 +454,7 @@ def summarize(path: Path) -> None:
     if eps:
         lines.append("")
         lines.append(f"**Executed episodes** (`failures.py --modes ...`; {len(eps)} episodes, sampled development "
-                     f"seeds {seeds_of(eps)}, tasks spread over each suite; cause = the first oracle step not "
+                     f"seeds {seeds_of(eps)}, {len({r['task'] for r in eps})} tasks of the four suites; cause = the first oracle step not "
                      f"done at the end, see the script's docstring):")
         lines.append("")
         causes = sorted({r.get("cause") or "success" for r in eps})
