@@ -26,7 +26,8 @@ supervisor modes) and, when it fails, classified by the first oracle step that i
 
 GLSR episodes also record the detector's false positives (a "judged successful" call while the task was not done)
 and whether the episode ended waiting on one. One worker, niced by the caller; resumable (``--out`` keeps finished
-episodes).
+episodes). Every record carries the hash of the checkpoint it ran with; a new checkpoint runs every layout again, and
+``--summarize`` shows the shipped checkpoint's records only (earlier ones stay in the file).
 """
 from __future__ import annotations
 
