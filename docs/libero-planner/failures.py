@@ -158,7 +158,8 @@ def surface_z(runner, uv: np.ndarray) -> np.ndarray:
     return cam.unproject(np.stack([u, v], 1).astype(float), z_range)[:, 2]
 
 
-def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_on: str = "auto") -> dict:
+def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_on: str = "auto", *,
+            checkpoint_hash: str) -> dict:
     """One layout: the t = 0 comparison, and with ``mode`` the executed episode and its classification."""
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.planners import Observation
@@ -169,7 +170,7 @@ def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_o
                     supervisor=SupervisorConfig(mode=mode or "global", confirm_success=confirm))
     info: dict = {"task": task, "suite": task.split(":")[0], "seed": seed, "mode": mode,
                   "confirm": confirm if mode and mode.startswith("glsr") else None,
-                  "checkpoint_hash": shipped_checkpoint_hash()}
+                  "checkpoint_hash": checkpoint_hash}
     held: dict[str, bool] = {}
     t0 = time.perf_counter()
 
@@ -346,7 +347,7 @@ def main() -> None:
                               "stop_on": ("either" if a.stop_on == "auto" else a.stop_on)})
                 if (task, seed, want, ckpt) in have:
                     continue
-                r = run_one(task, seed, mode, a.confirm, a.stop_on)
+                r = run_one(task, seed, mode, a.confirm, a.stop_on, checkpoint_hash=ckpt)
                 with out.open("a") as f:
                     f.write(json.dumps(r, default=_default) + "\n")
                 print(f"{task} seed {seed} {mode}: {r.get('cause', '-') if mode else r.get('learned_switches')} "
@@ -455,8 +456,8 @@ def summarize(path: Path) -> None:
     if eps:
         lines.append("")
         lines.append(f"**Executed episodes** (`failures.py --modes ...`; {len(eps)} episodes, sampled development "
-                     f"seeds {seeds_of(eps)}, {len({r['task'] for r in eps})} tasks of the four suites; cause = the first oracle step not "
-                     f"done at the end, see the script's docstring):")
+                     f"seeds {seeds_of(eps)}, {len({r['task'] for r in eps})} tasks of the four suites; cause = the "
+                     f"first oracle step not done at the end, see the script's docstring):")
         lines.append("")
         causes = sorted({r.get("cause") or "success" for r in eps})
         lines.append("| mode | episodes | " + " | ".join(causes) + " | episodes with detector false positives "
