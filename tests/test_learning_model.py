@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from tcot_hybrid.errors import ConfigError, PlanningError
-from tcot_hybrid.learning.model import ModelConfig, PlannerNet, count_parameters
+from tcot_hybrid.learning.model import ModelConfig, PlannerNet, count_parameters, widened_source
 from tcot_hybrid.learning.vocab import Vocabulary
 
 
@@ -45,6 +45,38 @@ def test_a_waypoint_slice_computes_exactly_those_waypoints(rot_head, radius):
             for k in ("uv_px", "z_m", "grip_logit", "heat_logits") + (("rot6",) if rot_head else ()):
                 torch.testing.assert_close(part[k], full[k][:, sl], rtol=1e-5, atol=1e-5)
             assert torch.equal(part["success_logit"], full["success_logit"])
+
+
+def test_widened_source_keeps_the_old_window_and_repeats_its_pieces():
+    src = widened_source(97, 51, 9, 6)
+    assert len(src) == 97 + 9 and list(src[97:]) == list(range(51, 60))  # local waypoints map to themselves
+    assert list(src[48 - 25:48 + 26]) == list(range(51))  # the old window's offsets keep their waypoint
+    # past the old window: the same place in an earlier whole piece (4 pieces of 6 in the old half)
+    assert src[48 + 26] == 25 + 2 and src[48 + 31] == 25 + 7 and src[48 + 48] == 25 + 24
+    assert src[48 - 26] == 25 - 2 and src[0] == 25 - 24
+    with pytest.raises(ValueError, match="n_global .*> n_global_old"):
+        widened_source(51, 51, 9, 6)
+    with pytest.raises(ValueError, match="whole piece"):
+        widened_source(21, 11, 9, 6)
+
+
+@pytest.mark.parametrize("rot_head", [False, True])
+def test_a_widened_network_repeats_the_old_waypoints_outputs(rot_head):
+    old = PlannerNet(ModelConfig(vocab_size=10, width=8, n_global=25, n_local=5, rot_head=rot_head)).eval()
+    with torch.no_grad():  # random maps and grip logits: every waypoint's outputs differ
+        old.maps.bias.copy_(torch.randn(old.maps.bias.shape, generator=torch.Generator().manual_seed(1)))
+        old.pooled_head[2].bias.copy_(torch.randn(old.pooled_head[2].bias.shape,
+                                                  generator=torch.Generator().manual_seed(2)))
+    new = PlannerNet(dataclasses.replace(old.cfg, n_global=41)).eval()
+    new.load_widened(old, points_per_segment=4)
+    src = torch.as_tensor(widened_source(41, 25, 5, 4))
+    with torch.inference_mode():
+        a, b = old(*_inputs()), new(*_inputs())
+    for k in ("uv_px", "z_m", "grip_logit", "heat_logits") + (("rot6",) if rot_head else ()):
+        torch.testing.assert_close(b[k], a[k][:, src], rtol=1e-5, atol=1e-5)
+    assert torch.equal(a["success_logit"], b["success_logit"])
+    with pytest.raises(ValueError, match="does not widen"):
+        PlannerNet(dataclasses.replace(old.cfg, n_global=41, width=16)).load_widened(old, points_per_segment=4)
 
 
 def test_a_waypoint_slice_needs_the_heatmap_head():

@@ -359,6 +359,36 @@ def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, e
                    model=ModelConfig(width=16)), progress=False, log=lambda *_: None)
 
 
+def test_a_longer_global_window_starts_from_a_shorter_windows_checkpoint(demo_file, tmp_path):
+    ev = TrajectoryWindowConfig(global_spacing="events", L_g=25, points_per_segment=4)
+    first = train(_cfg(demo_file, tmp_path / "w1.safetensors", max_epochs=1, windows=ev),
+                  progress=False, log=lambda *_: None)
+    logs = []
+    wide = dataclasses.replace(ev, L_g=41)
+    res = train(_cfg(demo_file, tmp_path / "w2.safetensors", max_epochs=1, stage1_epochs=0, windows=wide,
+                     init=str(first.checkpoint)), progress=False, log=logs.append)
+    assert any("global waypoints widened 25 -> 41" in line for line in logs)
+    ck = load_checkpoint(res.checkpoint)
+    assert ck.model.cfg.n_global == 41 and windows_from_meta(ck.meta["windows"]) == wide
+    with pytest.raises(ConfigError, match="widening needs windows.global_spacing 'events', got 'time'"):
+        train(_cfg(demo_file, tmp_path / "w3.safetensors", max_epochs=1, init=str(first.checkpoint),
+                   windows=dataclasses.replace(wide, global_spacing="time")), progress=False, log=lambda *_: None)
+    with pytest.raises(ConfigError, match="init checkpoint .* has model"):  # a shorter window is not a widening
+        train(_cfg(demo_file, tmp_path / "w4.safetensors", max_epochs=1, init=str(first.checkpoint),
+                   windows=dataclasses.replace(ev, L_g=21)), progress=False, log=lambda *_: None)
+
+
+def test_bf16_without_native_support_trains_in_fp32_and_says_so(demo_file, tmp_path, monkeypatch):
+    import tcot_hybrid.learning.train as train_mod
+
+    monkeypatch.setattr(train_mod, "native_bf16", lambda torch: False)
+    logs = []
+    res = train(_cfg(demo_file, tmp_path / "b.safetensors", max_epochs=1, bf16=True), progress=False,
+                log=logs.append)
+    assert any("has no native bf16, so training runs in fp32" in line for line in logs)
+    assert load_checkpoint(res.checkpoint).meta["bf16_used"] is False
+
+
 def test_detect_only_finetune_leaves_every_plan_output_bit_identical(demo_file, online_file, tmp_path, camera):
     """``trainable: detect`` on a shared-head checkpoint: the new detect head starts as the old detector, training
     changes the detector's outputs, and every global/local output (waypoints, heights, gripper bits) stays the

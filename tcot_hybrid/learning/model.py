@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -253,6 +254,28 @@ class PlannerNet(nn.Module):
             self.detect_head[2].weight.copy_(self.pooled_head[2].weight[n:n + 1])
             self.detect_head[2].bias.copy_(self.pooled_head[2].bias[n:n + 1])
 
+    def load_widened(self, other: "PlannerNet", points_per_segment: int) -> None:
+        """Copy ``other``'s weights, which differ from this network's only in ``n_global`` (fewer global
+        waypoints), mapping each of this network's waypoints to one of ``other``'s (:func:`widened_source`):
+        a warm start for a longer global window on event-spaced labels."""
+        src = widened_source(self.cfg.n_global, other.cfg.n_global, self.cfg.n_local, points_per_segment)
+        n_new, n_old = self.cfg.n_waypoints, other.cfg.n_waypoints
+        theirs = other.state_dict()
+        rows_maps = torch.cat([torch.as_tensor(src) + k * n_old for k in range(other.maps.out_channels // n_old)])
+        rows_pooled = torch.cat([torch.as_tensor(src), torch.tensor([n_old])])  # + the shared success logit
+        state = {}
+        for k, v in self.state_dict().items():
+            t = theirs[k]
+            if k.startswith("maps."):
+                t = t[rows_maps]
+            elif k.startswith("pooled_head.2."):
+                t = t[rows_pooled]
+            if t.shape != v.shape:
+                raise ValueError(f"{k}: {tuple(t.shape)} does not widen to {tuple(v.shape)} ({n_old} -> {n_new} "
+                                 "waypoints)")
+            state[k] = t
+        self.load_state_dict(state)
+
     # ------------------------------------------------------------------------------------------------
     def condition(self, tokens: torch.Tensor, mode: torch.Tensor, proprio: torch.Tensor) -> torch.Tensor:
         mask = (tokens > 0).float()
@@ -364,3 +387,22 @@ def matrix_to_rot6(R):
 
 def count_parameters(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
+
+
+def widened_source(n_global: int, n_global_old: int, n_local: int, points_per_segment: int) -> np.ndarray:
+    """For each waypoint of a network with ``n_global`` global waypoints, the index of the waypoint of one
+    with ``n_global_old`` (< ``n_global``) whose weights start it. Local waypoints map to themselves. A
+    global waypoint at offset d from the middle maps to offset d where the old window has it, else to the
+    same place in an earlier whole piece of ``points_per_segment`` points (event-spaced windows repeat that
+    structure: piece p's i-th point starts from piece p mod m's, m = whole pieces in the old half)."""
+    h_new, h_old = n_global // 2, n_global_old // 2
+    if n_global <= n_global_old or h_old < points_per_segment:
+        raise ValueError(f"widening needs n_global ({n_global}) > n_global_old ({n_global_old}) and at least one "
+                         f"whole piece of {points_per_segment} points in the old half ({h_old})")
+    period = (h_old // points_per_segment) * points_per_segment
+    out = []
+    for d in range(-h_new, h_new + 1):
+        a = abs(d) if abs(d) <= h_old else (abs(d) - 1) % period + 1
+        out.append(h_old + (a if d >= 0 else -a))
+    out += [n_global_old + j for j in range(n_local)]
+    return np.asarray(out, dtype=np.int64)

@@ -115,7 +115,9 @@ class TrainConfig:
     direct_horizon:  direct kind: predict the TCP displacement over this many planner steps.
     max_train_demos: use only the first N training demos (quick experiments, tests); None = all.
     val_max_frames:  validation frames per epoch (every k-th frame; all t = 0 frames kept). Down: faster epochs.
-    bf16:            bf16 autocast + channels_last (measured ~2-3x faster than fp32 on these CPUs).
+    bf16:            bf16 autocast + channels_last where the CPU computes bf16 natively (AVX512-BF16/AMX: measured
+                     ~2-3x faster than fp32); on other CPUs the run says so and trains in fp32 (emulated bf16 is
+                     slower: 3.4x on an AVX2 EPYC).
     heatmap_ce:      weight of a cross-entropy term pulling each heatmap toward a 1-cell Gaussian at its
                      label (a shape prior for soft-argmax; 0 = coordinate loss only).
     max_unknown_fraction: stored in the checkpoint; the planner refuses instructions with more unknown words.
