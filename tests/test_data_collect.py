@@ -63,6 +63,13 @@ def test_layout_and_invariants(files):
         g = a["obs/robot0_gripper_closed"]
         assert g[0] == 0 and g.max() == 1
         np.testing.assert_allclose(np.linalg.norm(a["obs/robot0_eef_quat"], axis=1), 1, atol=1e-5)
+        # the commanded waypoint: the TCP itself before the first plan, then waypoints the hand follows
+        tgt, eef = a["obs/tcp_target_pos"], a["obs/robot0_eef_pos"]
+        assert tgt.shape == (T, 3) and tgt.dtype == np.float32
+        np.testing.assert_array_equal(tgt[0], eef[0])
+        gap = np.linalg.norm(tgt - eef, axis=1)
+        assert np.median(gap) < 0.05 and gap[1:].min() < 1e-3  # leads the hand by a waypoint, reached at stops
+        assert len({tuple(p) for p in tgt}) > 5  # a path of waypoints, not one point
         assert len({im.tobytes() for im in a[f.image_key][::10]}) > 1  # the video changes
         # env args: one camera and config per file
         env = f.env_args

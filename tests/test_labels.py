@@ -169,11 +169,39 @@ def test_event_window_through_a_pause_and_back_to_back_switches():
     assert table[6, 5:].tolist() == [6, 7, 9, 11]  # at the grasp sample itself: the hold piece, then the rest
 
 
+def test_corner_points_keep_a_short_stroke_that_length_fractions_cut_across():
+    # one closed piece: down 4 cm, a 3 cm sideways push at the bottom, then a 30 cm climb away (1 cm a sample)
+    down = [(0.0, 0.0, 0.04 - 0.01 * i) for i in range(5)]
+    push = [(0.0, 0.01 * i, 0.0) for i in range(1, 4)]
+    climb = [(0.0, 0.03, 0.01 * i) for i in range(1, 31)]
+    xyz = np.array(down + push + climb)
+    T = len(xyz)
+    g = np.array([True] * (T - 1) + [False])  # the piece ends on the release at the last sample
+    g[0] = False  # closed from sample 1 on: piece 1..T-1
+    length = TrajectoryWindowConfig(L_g=9, global_spacing="events", points_per_segment=3)
+    corners = TrajectoryWindowConfig(L_g=9, global_spacing="events", points_per_segment=3, segment_points="corners")
+    t = 1
+    by_length = event_index_table(xyz, g, length)[t, 5:8].tolist()
+    by_corner = event_index_table(xyz, g, corners)[t, 5:8].tolist()
+    assert by_corner == [4, 7, T - 1]  # the bottom and the push's end, then the switch sample
+    assert by_length[-1] == T - 1 and 4 not in by_length and 7 not in by_length  # equal fractions miss both
+    # every window still ends each piece on its switch and runs forward in time
+    table = event_index_table(xyz, g, corners)
+    assert (np.diff(table, axis=1) >= 0).all() and (table[:, 4] == np.arange(T)).all()
+    # a straight piece: no corner, the points halve the longest stretch instead (as length fractions would)
+    line, gl = _line_track(13, [False] * 13)
+    straight = TrajectoryWindowConfig(L_g=9, global_spacing="events", points_per_segment=4, segment_points="corners")
+    assert event_index_table(line, gl, straight)[0, 5:].tolist() == [3, 6, 9, 12]
+    with pytest.raises(ConfigError, match="segment_points = 'corner' is not valid; choose one of length, corners"):
+        TrajectoryWindowConfig(segment_points="corner")
+
+
 def test_windows_from_checkpoint_metadata():
     old = {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}  # written before event spacing existed: eq. 4 windows
     assert windows_from_meta(old) == TrajectoryWindowConfig()
-    new = {**old, "global_spacing": "events", "points_per_segment": 5}
+    new = {**old, "global_spacing": "events", "points_per_segment": 5}  # before segment_points: length fractions
     assert windows_from_meta(new) == TrajectoryWindowConfig(global_spacing="events", points_per_segment=5)
+    assert windows_from_meta({**new, "segment_points": "corners"}).segment_points == "corners"
     with pytest.raises(ConfigError, match="lack n_g, L_l, n_l"):
         windows_from_meta({"L_g": 51})
     with pytest.raises(ConfigError, match="lack points_per_segment"):  # never a silent 6 for an event checkpoint

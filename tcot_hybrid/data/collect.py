@@ -105,6 +105,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
             return
         tcp = sim.tcp_pos()
         uv, depth = cam.project(tcp[None])
+        ex = s.executor
         rendered = len(rows) % image_every == 0
         rows.append({
             "image": sim.render(camera, px, px) if rendered else None, "rendered": rendered,
@@ -112,6 +113,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
             "eef_quat": _quat_wxyz(sim.data.site_xmat[sim.ee_site]),
             "gripper_qpos": sim.data.qpos[sim.gripper_qpos].copy(),
             "gripper_closed": sim.gripper_closed_cmd(),
+            "target": ex.points[ex.index].copy() if 0 <= ex.index < len(ex.points) else tcp,
             "uv": uv[0], "depth": depth[0],
             "success": bool(task.success(sim.world)),
         })
@@ -150,6 +152,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
         "obs/robot0_gripper_closed": grip,
         "obs/eef_uv_px": np.array([r["uv"] for r in rows], dtype=np.float32),
         "obs/eef_depth_m": np.array([r["depth"] for r in rows], dtype=np.float32),
+        "obs/tcp_target_pos": np.array([r["target"] for r in rows], dtype=np.float32),
         "task_success": succ,
         "actions": actions,
     }

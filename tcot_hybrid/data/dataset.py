@@ -13,6 +13,9 @@ Layout (``docs/dataset.md`` describes every field)::
         obs/<camera>_image, obs/robot0_*, obs/eef_uv_px, obs/eef_depth_m, task_success, actions
         obs/image_valid (optional, uint8 (T,)): which samples have a rendered image (``tcot collect
                          --image-every``); absent = all of them
+        obs/tcp_target_pos (optional, float32 (T, 3)) [m, world]: the waypoint the executor was driving the
+                         TCP to at each sample (the TCP itself before the first plan). In contact it runs ahead
+                         of obs/robot0_eef_pos: a knob bar holds the hand back while the command goes past it
     /mask/train, /mask/valid   demo names (bytes), split by seed
 
 Every error is a :class:`~tcot_hybrid.errors.DatasetError` naming the file and what is wrong; no raw
@@ -46,6 +49,7 @@ OBS_SPEC: dict[str, tuple[type, tuple]] = {
     "eef_depth_m": (np.float32, ()),
 }
 IMAGE_VALID = "obs/image_valid"  # optional per-sample mask of rendered images
+TCP_TARGET = "obs/tcp_target_pos"  # optional per-sample commanded waypoint [m, world]
 TOP_SPEC: dict[str, tuple[type, tuple]] = {
     "task_success": (np.uint8, ()),
     "actions": (np.float32, (4,)),
@@ -287,6 +291,8 @@ class DemoFile:
         specs.update(TOP_SPEC)
         if IMAGE_VALID in g:
             specs[IMAGE_VALID] = (np.uint8, ())
+        if TCP_TARGET in g:
+            specs[TCP_TARGET] = (np.float32, (3,))
         for key, (dtype, trailing) in specs.items():
             if key not in g:
                 raise self._fail(f"{where} lacks dataset {key!r}")

@@ -29,6 +29,7 @@ from tcot_hybrid.errors import ConfigError, DatasetError
 
 
 GLOBAL_SPACINGS = ("time", "events")
+SEGMENT_POINTS = ("length", "corners")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -45,6 +46,10 @@ class TrajectoryWindowConfig:
     n_l: stride between local points [steps], must be < n_g (local plans are denser). Down: denser.
     global_spacing: "time" (eq. 4: every n_g steps) or "events" (points_per_segment points between
          consecutive gripper switches, spaced by path length; see the module doc). n_g is used by "time" only.
+    segment_points: "events" only: where a piece's points go. "length": at equal path-length fractions;
+         "corners": where the path turns (greedy Douglas-Peucker: each next point is the sample farthest from
+         the polyline through the points so far), so a short contact stroke inside a long piece (a knob pushed
+         sideways at the bottom of a descent) keeps its corners where equal fractions cut across it.
     points_per_segment: "events" only: points per path piece between gripper switches, at most L_g // 2.
          (L_g // 2) / points_per_segment pieces fit in the future half; the long suite has 4 switches (5
          pieces, the last a short retreat), so with 6 the first four pieces take 24 of the 25 future points
@@ -56,12 +61,14 @@ class TrajectoryWindowConfig:
     L_l: int = 8
     n_l: int = 2
     global_spacing: str = "time"
+    segment_points: str = "length"
     points_per_segment: int = 6
 
     def __post_init__(self) -> None:
         for name in ("L_g", "n_g", "L_l", "n_l", "points_per_segment"):
             require_int(name, getattr(self, name), minimum=1)
         require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
+        require_choice("segment_points", self.segment_points, SEGMENT_POINTS)
         if self.global_spacing == "events" and self.points_per_segment > self.L_g // 2:
             raise ConfigError(f"points_per_segment = {self.points_per_segment} must be <= L_g // 2 = {self.L_g // 2} "
                               "with global_spacing = 'events' (else the first switch falls outside the window)")
@@ -100,7 +107,8 @@ def windows_from_meta(w: dict) -> TrajectoryWindowConfig:
     if missing:
         raise ConfigError(f"checkpoint windows {w!r} lack {', '.join(missing)}")
     kw = {k: w[k] for k in required}  # ints are checked (not truncated) by TrajectoryWindowConfig
-    return TrajectoryWindowConfig(**kw, global_spacing=spacing)
+    # checkpoints written before segment_points existed placed a piece's points by path length
+    return TrajectoryWindowConfig(**kw, global_spacing=spacing, segment_points=w.get("segment_points", "length"))
 
 
 def _check_T(T: int) -> None:
@@ -141,20 +149,68 @@ def global_index_table(T: int, cfg: TrajectoryWindowConfig = TrajectoryWindowCon
     return np.clip(np.arange(T)[:, None] + cfg.global_offsets[None, :], 0, T - 1)
 
 
-def _future_event_indices(cum_len: np.ndarray, switches: np.ndarray, t: int, n: int, per: int) -> np.ndarray:
+def _piece_by_length(cum_len: np.ndarray, start: int, end: int, per: int, xyz: np.ndarray) -> np.ndarray:
+    """``per`` sample indices in (start, end] at path-length fractions 1/per .. 1 of the piece."""
+    piece = cum_len[start:end + 1] - cum_len[start]
+    frac = np.arange(1, per + 1) / per
+    idx = start + np.searchsorted(piece, frac * piece[-1] - 1e-9, side="left")  # 1 nm: float sums of steps
+    idx[-1] = end  # the switch sample itself, whatever the rounding
+    return np.minimum(idx, end)
+
+
+def _piece_by_corners(cum_len: np.ndarray, start: int, end: int, per: int, xyz: np.ndarray) -> np.ndarray:
+    """``per`` sample indices in (start, end], the last ``end``: greedy Douglas-Peucker from the chord
+    start-end, each next point the sample farthest from the polyline through the points so far. Once no sample
+    lies more than 1 mm off it, the rest split the longest stretch (by path length) in half; a piece of fewer
+    samples than points repeats its end."""
+    chosen = [start, end]
+    while len(chosen) < per + 1:
+        best, best_d = None, 1e-3
+        for a, b in zip(chosen[:-1], chosen[1:]):
+            if b - a < 2:
+                continue
+            pts, pa, pb = xyz[a + 1:b], xyz[a], xyz[b]
+            ab = pb - pa
+            n2 = float(ab @ ab)
+            u = np.clip((pts - pa) @ ab / n2, 0.0, 1.0) if n2 > 1e-12 else np.zeros(len(pts))
+            d = np.linalg.norm(pts - (pa + u[:, None] * ab), axis=1)
+            i = int(d.argmax())
+            if d[i] > best_d:
+                best, best_d = a + 1 + i, float(d[i])
+        if best is None:  # straight: halve the longest stretch that still has an inner sample
+            gaps = [(cum_len[b] - cum_len[a], a, b) for a, b in zip(chosen[:-1], chosen[1:]) if b - a >= 2]
+            if not gaps:
+                break
+            _, a, b = max(gaps)
+            best = a + 1 + int(np.searchsorted(cum_len[a + 1:b], 0.5 * (cum_len[a] + cum_len[b])))
+            best = min(best, b - 1)
+        chosen = sorted(chosen + [best])
+    idx = chosen[1:]
+    return np.array(idx + [end] * (per - len(idx)), dtype=np.int64)
+
+
+_PIECE_POINTS = {"length": _piece_by_length, "corners": _piece_by_corners}
+
+
+def _future_event_indices(cum_len: np.ndarray, switches: np.ndarray, t: int, n: int, per: int,
+                          xyz: np.ndarray | None = None, segment_points: str = "length",
+                          cache: dict | None = None) -> np.ndarray:
     """(n,) sample indices after ``t``: ``per`` points per piece between the switches after t (and the last
-    sample), at path-length fractions 1/per .. 1 of each piece; clamped to the last sample when they run out."""
+    sample), the last of each on its switch, placed by ``segment_points`` (path-length fractions 1/per .. 1, or
+    corners of the path ``xyz``); clamped to the last sample when they run out. ``cache`` keeps the pieces
+    placed so far (all but the first piece are the same for every t)."""
     T = len(cum_len)
     ends = np.r_[switches[switches > t], T - 1]
+    place = _PIECE_POINTS[segment_points]
+    cache = {} if cache is None else cache
     out, start = [], t
     for end in ends:
         if end <= start:
             continue
-        piece = cum_len[start:end + 1] - cum_len[start]
-        frac = np.arange(1, per + 1) / per
-        idx = start + np.searchsorted(piece, frac * piece[-1] - 1e-9, side="left")  # 1 nm: float sums of steps
-        idx[-1] = end  # the switch sample itself, whatever the rounding
-        out.extend(np.minimum(idx, end).tolist())
+        key = (start, int(end))
+        if key not in cache:
+            cache[key] = place(cum_len, start, int(end), per, xyz).tolist()
+        out.extend(cache[key])
         start = end
         if len(out) >= n:
             break
@@ -166,8 +222,8 @@ def event_index_table(xyz_m: np.ndarray, gripper_closed: np.ndarray,
                       cfg: TrajectoryWindowConfig) -> np.ndarray:
     """(T, L_g) event-spaced global indices for every step (``global_spacing = "events"``, module doc): the
     middle point is t, the future half has ``points_per_segment`` points per piece between gripper switches
-    (path-length spaced, ending on the switch sample: the first sample with the new gripper bit), and the
-    past half is the same built backwards in time."""
+    (placed by ``cfg.segment_points``, ending on the switch sample: the first sample with the new gripper bit),
+    and the past half is the same built backwards in time."""
     p = np.asarray(xyz_m, float)
     g = np.asarray(gripper_closed, bool)
     T = len(p)
@@ -179,10 +235,12 @@ def event_index_table(xyz_m: np.ndarray, gripper_closed: np.ndarray,
     # backwards in time, a piece ends on the last sample with the old bit: reversed index T - 1 - (s - 1) = T - s
     switches_rev = np.sort(T - switches)
     table = np.empty((T, cfg.L_g), dtype=np.int64)
+    fwd, bwd = {}, {}
     for t in range(T):
         table[t, h] = t
-        table[t, h + 1:] = _future_event_indices(cum, switches, t, h, per)
-        past = _future_event_indices(cum_rev, switches_rev, T - 1 - t, h, per)
+        table[t, h + 1:] = _future_event_indices(cum, switches, t, h, per, p, cfg.segment_points, fwd)
+        past = _future_event_indices(cum_rev, switches_rev, T - 1 - t, h, per, p[::-1], cfg.segment_points,
+                                     bwd)
         table[t, :h] = (T - 1 - past)[::-1]
     return table
 
@@ -275,6 +333,6 @@ def window_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowCo
     return global_labels(track, cfg), local_labels(track, cfg)
 
 
-__all__ = ["GLOBAL_SPACINGS", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
+__all__ = ["GLOBAL_SPACINGS", "SEGMENT_POINTS", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
            "global_labels", "local_index_table", "local_indices", "local_labels", "make_track",
            "track_from_arrays", "window_labels", "windows_from_meta"]

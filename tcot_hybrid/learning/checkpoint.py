@@ -31,6 +31,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tcot_hybrid.errors import CheckpointError, ConfigError, short_repr
+from tcot_hybrid.data.labels import GLOBAL_SPACINGS, SEGMENT_POINTS
 from tcot_hybrid.jsonio import json_default as _json_default
 
 FORMAT = "tcot-planner-v1"
@@ -285,10 +286,11 @@ def _check_meta_types(meta: dict, where: str) -> None:
         if not isinstance(w, dict):
             raise bad("windows", "a JSON object")
         for k, v in w.items():
-            if k == "global_spacing":
-                if v not in ("time", "events"):
-                    raise CheckpointError(f"{where}: windows.global_spacing must be 'time' or 'events', got "
-                                          f"{short_repr(v)}")
+            if k in ("global_spacing", "segment_points"):
+                choices = GLOBAL_SPACINGS if k == "global_spacing" else SEGMENT_POINTS
+                if v not in choices:
+                    raise CheckpointError(f"{where}: windows.{k} must be one of {', '.join(map(repr, choices))}, "
+                                          f"got {short_repr(v)}")
             elif not isinstance(v, int) or isinstance(v, bool):
                 raise CheckpointError(f"{where}: windows.{k} must be an integer, got {short_repr(v)}")
     if checkpoint_world(meta) not in WORLDS:
