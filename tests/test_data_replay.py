@@ -63,6 +63,51 @@ def test_noise_is_seeded_and_changes_the_plan(tool_demos):
             dataclasses.replace(obs, step=3), mode="global")
 
 
+def test_commanded_path_and_orientation_reach_the_plan(tool_demos):
+    from tcot_hybrid.data.dataset import TCP_TARGET, open_demos
+    from tcot_hybrid.data.labels import TRACK_KEYS, global_labels, track_from_arrays
+    from tcot_hybrid.episode import build_stack
+    from tcot_hybrid.learning.data import quat_wxyz_to_matrix
+
+    with open_demos(tool_demos) as f:
+        name = f.demos[0]
+        tr = track_from_arrays(f.read(name, TRACK_KEYS))
+        a = f.read(name, [TCP_TARGET, "obs/robot0_eef_quat"])
+    camera = build_stack(RunConfig(task=TOOL)).camera
+    obs = Observation(step=0, image=None, depth_m=None, q=np.zeros(7), gripper_closed=False, instruction="")
+    w = dataclasses.replace(ReplayConfig().windows, global_spacing="events", global_path="commanded")
+    rot = quat_wxyz_to_matrix(a["obs/robot0_eef_quat"])
+    plan = LabelReplayPlanner(tr, camera, config=ReplayConfig(windows=w, orientation=True), demo_seed=1,
+                              target_xyz=a[TCP_TARGET], tcp_rot=rot).plan(obs, mode="global")
+    from tcot_hybrid.data.labels import commanded_track
+
+    idx = global_labels(commanded_track(tr, a[TCP_TARGET], camera), w).indices[0, w.global_center:]
+    pts = camera.unproject(plan.uv_px, plan.depth_m)
+    np.testing.assert_allclose(pts, a[TCP_TARGET][idx], atol=1e-4)  # the commanded waypoints, lifted back
+    assert not np.allclose(a[TCP_TARGET][idx], tr.xyz_m[idx], atol=1e-3)  # not the observed path
+    np.testing.assert_allclose(plan.tcp_rot, rot[idx], atol=1e-6)
+    with pytest.raises(Exception, match="commanded waypoints must have shape"):
+        commanded_track(tr, a[TCP_TARGET][:-1], camera)
+
+
+def test_a_file_without_commanded_waypoints_is_named_and_the_cap_keeps_the_first_seeds(tool_demos, tmp_path):
+    import shutil
+
+    import h5py
+
+    report = replay_file(tool_demos, workers=1, progress=False, max_per_task=1)
+    assert [(r["task"], r["seed"]) for r in report["demos"]] == [(TOOL, 1)]
+    old = tmp_path / "old.hdf5"
+    shutil.copy(tool_demos, old)
+    with h5py.File(old, "a") as h5:
+        for g in h5["data"].values():
+            del g["obs/tcp_target_pos"]
+    with pytest.raises(ConfigError, match="has no obs/tcp_target_pos .*--global-path commanded needs it"):
+        cmd_replay(["--data", str(old), "--global-spacing", "events", "--global-path", "commanded", "--workers", "1"])
+    with pytest.raises(ConfigError, match="--max-per-task must be >= 1, got 0"):
+        cmd_replay(["--data", str(old), "--max-per-task", "0"])
+
+
 def test_bad_inputs_are_named(tool_demos):
     with pytest.raises(ConfigError, match="noise_px"):
         ReplayConfig(noise_px=-1.0)

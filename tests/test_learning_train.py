@@ -146,6 +146,32 @@ def test_direct_kind_trains(demo_file, tmp_path, camera):
     load_checkpoint(res.checkpoint, robot="panda", camera=camera, kind="direct")
 
 
+def test_commanded_global_labels_come_from_the_recorded_waypoints(demo_file, tmp_path, camera):
+    import shutil
+
+    import h5py
+
+    vocab = Vocabulary.build(instructions_of(demo_file))
+    observed = TrajectoryWindowConfig(global_spacing="events")
+    commanded = dataclasses.replace(observed, global_path="commanded")
+    with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*global_path 'commanded'"):
+        load_frames(demo_file, "train", vocab, windows=commanded, max_tokens=24, direct_horizon=3)
+    ahead = tmp_path / "ahead.hdf5"
+    shutil.copy(demo_file, ahead)
+    lead = np.array([0.0, 0.02, 0.0], np.float32)  # the command runs 2 cm ahead of the hand along y
+    with h5py.File(ahead, "a") as h5:
+        for g in h5["data"].values():
+            g.create_dataset("obs/tcp_target_pos", data=g["obs/robot0_eef_pos"][:] + lead)
+    a = load_frames(ahead, "train", vocab, windows=observed, max_tokens=24, direct_horizon=3)
+    b = load_frames(ahead, "train", vocab, windows=commanded, max_tokens=24, direct_horizon=3)
+    # same points, each 2 cm ahead (the float32 sum may move a path-length fraction onto the adjacent sample)
+    same = ((b.g_xyz - torch.from_numpy(lead) - a.g_xyz).abs() < 1e-5).all(-1)
+    assert same.float().mean() > 0.99
+    assert not torch.allclose(b.g_uv, a.g_uv, atol=0.5)  # pixels through the demo's camera moved with them
+    torch.testing.assert_close(b.g_z[same], a.g_z[same])  # a sideways lead leaves the heights
+    torch.testing.assert_close(b.l_xyz, a.l_xyz)  # local labels stay the observed path
+
+
 def test_shift_augmentation_moves_labels_with_pixels(demo_file):
     vocab = Vocabulary.build(instructions_of(demo_file))
     fs = load_frames(demo_file, "train", vocab, windows=TrainConfig().windows, max_tokens=24, direct_horizon=3)

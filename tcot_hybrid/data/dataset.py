@@ -371,6 +371,12 @@ class DemoFile:
                                    f"re-collect it or drop it from the masks")
         return out
 
+    def has(self, name: str, key: str) -> bool:
+        """Whether demo ``name`` holds the dataset ``key`` (an optional one, e.g. ``obs/tcp_target_pos``)."""
+        self._check_open()
+        self.info(name)  # names the file and the demo when there is no such demo
+        return key in self._h5["data"][name]
+
     def image_valid(self, name: str) -> np.ndarray:
         """(T,) bool: which samples of one demo have a rendered planner image (all, unless collected with
         ``--image-every``)."""

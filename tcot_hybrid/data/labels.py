@@ -30,6 +30,7 @@ from tcot_hybrid.errors import ConfigError, DatasetError
 
 GLOBAL_SPACINGS = ("time", "events")
 SEGMENT_POINTS = ("length", "corners")
+GLOBAL_PATHS = ("observed", "commanded")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -50,6 +51,10 @@ class TrajectoryWindowConfig:
          "corners": where the path turns (greedy Douglas-Peucker: each next point is the sample farthest from
          the polyline through the points so far), so a short contact stroke inside a long piece (a knob pushed
          sideways at the bottom of a descent) keeps its corners where equal fractions cut across it.
+    global_path: what global labels trace. "observed": the TCP where it was; "commanded": the waypoint the
+         executor was driving it to (``obs/tcp_target_pos``). They differ in contact: a knob bar or a door leaf
+         holds the hand back while the command goes on past it, and a plan of the observed path stops at the
+         bar (a replayed knob push turned it 0.03 rad of the 0.6 it needs; docs/libero-planner.md).
     points_per_segment: "events" only: points per path piece between gripper switches, at most L_g // 2.
          (L_g // 2) / points_per_segment pieces fit in the future half; the long suite has 4 switches (5
          pieces, the last a short retreat), so with 6 the first four pieces take 24 of the 25 future points
@@ -62,6 +67,7 @@ class TrajectoryWindowConfig:
     n_l: int = 2
     global_spacing: str = "time"
     segment_points: str = "length"
+    global_path: str = "observed"
     points_per_segment: int = 6
 
     def __post_init__(self) -> None:
@@ -69,6 +75,7 @@ class TrajectoryWindowConfig:
             require_int(name, getattr(self, name), minimum=1)
         require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
         require_choice("segment_points", self.segment_points, SEGMENT_POINTS)
+        require_choice("global_path", self.global_path, GLOBAL_PATHS)
         if self.global_spacing == "events" and self.points_per_segment > self.L_g // 2:
             raise ConfigError(f"points_per_segment = {self.points_per_segment} must be <= L_g // 2 = {self.L_g // 2} "
                               "with global_spacing = 'events' (else the first switch falls outside the window)")
@@ -108,7 +115,8 @@ def windows_from_meta(w: dict) -> TrajectoryWindowConfig:
         raise ConfigError(f"checkpoint windows {w!r} lack {', '.join(missing)}")
     kw = {k: w[k] for k in required}  # ints are checked (not truncated) by TrajectoryWindowConfig
     # checkpoints written before segment_points existed placed a piece's points by path length
-    return TrajectoryWindowConfig(**kw, global_spacing=spacing, segment_points=w.get("segment_points", "length"))
+    return TrajectoryWindowConfig(**kw, global_spacing=spacing, segment_points=w.get("segment_points", "length"),
+                                  global_path=w.get("global_path", "observed"))
 
 
 def _check_T(T: int) -> None:
@@ -309,6 +317,17 @@ def track_from_arrays(arrays: dict, *, uv_key: str = TRACK_KEYS[0]) -> Track:
     return make_track(arrays[uv_key], pos[:, 2], arrays[TRACK_KEYS[2]], pos)
 
 
+def commanded_track(track: Track, target_xyz: np.ndarray, camera) -> Track:
+    """``track`` with its path replaced by the commanded waypoints ``target_xyz`` (T, 3) [m, world]: pixels
+    through the demo's planner ``camera``, heights from their z; the gripper bits stay (global_path
+    'commanded')."""
+    target = np.asarray(target_xyz, dtype=np.float64)
+    if target.shape != (len(track.uv_px), 3):
+        raise DatasetError(f"commanded waypoints must have shape ({len(track.uv_px)}, 3), got {target.shape}")
+    uv, _ = camera.project(target)
+    return make_track(uv, target[:, 2], track.gripper_closed, target)
+
+
 def _gather(track: Track, idx: np.ndarray) -> WindowLabels:
     return WindowLabels(idx, track.uv_px[idx], track.z_m[idx], track.gripper_closed[idx])
 
@@ -333,6 +352,6 @@ def window_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowCo
     return global_labels(track, cfg), local_labels(track, cfg)
 
 
-__all__ = ["GLOBAL_SPACINGS", "SEGMENT_POINTS", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
+__all__ = ["GLOBAL_PATHS", "GLOBAL_SPACINGS", "SEGMENT_POINTS", "commanded_track", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
            "global_labels", "local_index_table", "local_indices", "local_labels", "make_track",
            "track_from_arrays", "window_labels", "windows_from_meta"]

@@ -24,8 +24,9 @@ import numpy as np
 
 from tcot_hybrid.config import require_nonnegative
 from tcot_hybrid.data.dataset import open_demos
-from tcot_hybrid.data.labels import (GLOBAL_SPACINGS, TRACK_KEYS, Track, TrajectoryWindowConfig, global_labels,
-                                     track_from_arrays)
+from tcot_hybrid.data.dataset import TCP_TARGET
+from tcot_hybrid.data.labels import (GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POINTS, TRACK_KEYS, Track,
+                                     TrajectoryWindowConfig, commanded_track, global_labels, track_from_arrays)
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation, Planner
 from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
@@ -33,7 +34,10 @@ from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
 
 @dataclass(frozen=True, kw_only=True)
 class ReplayConfig:
-    """windows: the label windows (only the global ones matter: L_g, n_g or global_spacing/points_per_segment).
+    """windows: the label windows (only the global ones matter: L_g, n_g or global_spacing/points_per_segment,
+    segment_points, global_path).
+    orientation: also replay the demo's TCP orientation at each point (what a planner with a rotation head
+    plans: LIBERO's); else every point keeps the executor's default hand orientation.
     noise_px / noise_z_m: standard deviation of the Gaussian noise added to every replayed pixel [px] / TCP height [m] (0 = the exact label); seeded per demo
     by ``noise_seed`` and the demo's seed."""
 
@@ -41,6 +45,7 @@ class ReplayConfig:
     noise_px: float = 0.0
     noise_z_m: float = 0.0
     noise_seed: int = 0
+    orientation: bool = False
     learned: LearnedPlannerConfig = LearnedPlannerConfig()
 
     def __post_init__(self) -> None:
@@ -49,19 +54,25 @@ class ReplayConfig:
 
 
 class LabelReplayPlanner(Planner):
-    """Returns the demo's t = 0 global label (points from now on) as its only plan; no image, no detector."""
+    """Returns the demo's t = 0 global label (points from now on) as its only plan; no image, no detector.
+    ``track`` is the demo's (observed) track; ``target_xyz`` its commanded waypoints (global_path 'commanded');
+    ``tcp_rot`` (T, 3, 3) its world TCP orientations (``config.orientation``)."""
 
     name = "label_replay"
     needs_image = False
 
-    def __init__(self, track: Track, camera, *, config: ReplayConfig, demo_seed: int):
+    def __init__(self, track: Track, camera, *, config: ReplayConfig, demo_seed: int,
+                 target_xyz: np.ndarray | None = None, tcp_rot: np.ndarray | None = None):
         w = config.windows
+        if w.global_path == "commanded":
+            track = commanded_track(track, target_xyz, camera)
         label = global_labels(track, w)
         idx = label.indices[0, w.global_center:]
         rng = np.random.default_rng([config.noise_seed, demo_seed])
         self.uv = track.uv_px[idx].astype(float) + rng.normal(0.0, config.noise_px, (len(idx), 2))
         self.z = track.z_m[idx].astype(float) + rng.normal(0.0, config.noise_z_m, len(idx))
         self.closed = np.asarray(track.gripper_closed)[idx].astype(bool)
+        self.rot = None if tcp_rot is None else np.asarray(tcp_rot, float)[idx]
         self.camera, self.config = camera, config
 
     def plan(self, obs: Observation, *, mode: str):
@@ -69,7 +80,8 @@ class LabelReplayPlanner(Planner):
             raise PlanningError(f"label replay has only the t = 0 global label; asked for a {mode!r} plan at "
                                 f"step {obs.step} (run it with supervisor.mode = 'global')")
         return height_plan(self.camera, self.uv, self.z, self.closed, kind="global", step=0,
-                           config=self.config.learned, global_spacing=self.config.windows.global_spacing)
+                           config=self.config.learned, global_spacing=self.config.windows.global_spacing,
+                           tcp_rot=self.rot)
 
 
 def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
@@ -82,13 +94,23 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
     with open_demos(path) as f:
         info, env = f.info(name), dict(f.env_args)
         track = track_from_arrays(f.read(name, TRACK_KEYS))
+        target = rot = None
+        if config.windows.global_path == "commanded":
+            if not f.has(name, TCP_TARGET):
+                raise ConfigError(f"{path}: {name} has no {TCP_TARGET} (collected before it was recorded); "
+                                  "--global-path commanded needs it")
+            target = f.read(name, [TCP_TARGET])[TCP_TARGET]
+        if config.orientation:
+            from tcot_hybrid.learning.data import quat_wxyz_to_matrix
+
+            rot = quat_wxyz_to_matrix(f.read(name, ["obs/robot0_eef_quat"])["obs/robot0_eef_quat"])
     base = RunConfig()
     cfg = RunConfig(task=info.task, seed=info.seed, robot=info.robot, controller=env["controller"], ik=env["ik"],
                     timing=TimingConfig(sim_dt=env["sim_dt"], ctrl_dt=env["ctrl_dt"], plan_dt=env["plan_dt"]),
                     scene=replace(SceneConfig(), planner_camera=env["camera"], planner_image_px=int(env["width"])),
                     supervisor=replace(base.supervisor, mode="global"))
     runner = EpisodeRunner(cfg, planner_factory=lambda ctx: LabelReplayPlanner(
-        track, ctx.camera, config=config, demo_seed=info.seed))
+        track, ctx.camera, config=config, demo_seed=info.seed, target_xyz=target, tcp_rot=rot))
     rec = runner.run()
     return {"demo": name, "task": info.task, "seed": info.seed, "steps": len(track.uv_px), "success": rec["success"],
             "fault": rec["fault"]}
@@ -99,8 +121,9 @@ def _job(args):
 
 
 def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), tasks: list[str] | None = None,
-                workers: int = 2, progress: bool = True) -> dict:
-    """Replay every successful demo of ``path`` (optionally only ``tasks``); per-task success and the demos."""
+                workers: int = 2, progress: bool = True, max_per_task: int | None = None) -> dict:
+    """Replay every successful demo of ``path`` (optionally only ``tasks``, and only each task's
+    ``max_per_task`` lowest-seed ones); per-task success and the demos."""
     from tqdm import tqdm
 
     with open_demos(path) as f:
@@ -109,7 +132,14 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
     for t in tasks or []:
         if t not in known:
             raise ConfigError(f"task {t!r} has no demo in {path}; its tasks: {', '.join(known)}")
-    names = [i.name for i in infos if i.success and (not tasks or i.task in tasks)]
+    chosen = sorted((i for i in infos if i.success and (not tasks or i.task in tasks)), key=lambda i: (i.task, i.seed))
+    if max_per_task is not None:
+        kept: list = []
+        for i in chosen:
+            if sum(k.task == i.task for k in kept) < max_per_task:
+                kept.append(i)
+        chosen = kept
+    names = [i.name for i in chosen]
     if not names:
         raise ConfigError(f"no successful demo to replay in {path}")
     t0 = time.perf_counter()
@@ -135,7 +165,8 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
         c["success_rate"] = round(c["successes"] / c["demos"], 4)
     w = config.windows
     return {"data": str(path), "L_g": w.L_g, "n_g": w.n_g, "global_spacing": w.global_spacing,
-            "points_per_segment": w.points_per_segment, "noise_px": config.noise_px, "noise_z_m": config.noise_z_m,
+            "points_per_segment": w.points_per_segment, "segment_points": w.segment_points,
+            "global_path": w.global_path, "orientation": config.orientation, "noise_px": config.noise_px, "noise_z_m": config.noise_z_m,
             "noise_seed": config.noise_seed, "per_task": per_task,
             "success_rate": round(sum(r["success"] for r in rows) / len(rows), 4), "demos": rows,
             "wall_s": round(time.perf_counter() - t0, 1)}
@@ -166,6 +197,13 @@ def cmd_replay(argv: list[str]) -> int:
                    help="time: eq. 4, every n_g steps; events: points per piece between gripper switches")
     p.add_argument("--points-per-segment", type=int, default=TrajectoryWindowConfig.points_per_segment,
                    help="events spacing: points per piece between gripper switches")
+    p.add_argument("--segment-points", choices=SEGMENT_POINTS, default=TrajectoryWindowConfig.segment_points,
+                   help="events spacing: a piece's points at equal path-length fractions or where the path turns")
+    p.add_argument("--global-path", choices=GLOBAL_PATHS, default=TrajectoryWindowConfig.global_path,
+                   help="label the observed TCP path or the commanded waypoints (obs/tcp_target_pos)")
+    p.add_argument("--orientation", action="store_true",
+                   help="also replay the demo's TCP orientation (what a planner with a rotation head plans)")
+    p.add_argument("--max-per-task", type=int, help="replay only each task's first N successful demos (by seed)")
     p.add_argument("--noise-px", type=float, default=0.0, help="Gaussian noise on every pixel [px]")
     p.add_argument("--noise-z-m", type=float, default=0.0, help="Gaussian noise on every TCP height [m]")
     p.add_argument("--noise-seed", type=int, default=0)
@@ -180,13 +218,17 @@ def cmd_replay(argv: list[str]) -> int:
         raise ConfigError(f"--readme {args.readme} has no <!-- replay:start --> ... <!-- replay:end --> section")
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    if args.max_per_task is not None and args.max_per_task < 1:
+        raise ConfigError(f"--max-per-task must be >= 1, got {args.max_per_task}")
     if args.n_g < 2:  # TrajectoryWindowConfig needs some local stride n_l < n_g; the replay uses no local window
         raise ConfigError(f"--n-g must be >= 2, got {args.n_g}")
     windows = TrajectoryWindowConfig(L_g=args.L_g, n_g=args.n_g, L_l=1, n_l=1, global_spacing=args.global_spacing,
-                                     points_per_segment=args.points_per_segment)
-    cfg = ReplayConfig(windows=windows, noise_px=args.noise_px, noise_z_m=args.noise_z_m, noise_seed=args.noise_seed)
+                                     points_per_segment=args.points_per_segment, segment_points=args.segment_points,
+                                     global_path=args.global_path)
+    cfg = ReplayConfig(windows=windows, noise_px=args.noise_px, noise_z_m=args.noise_z_m, noise_seed=args.noise_seed,
+                       orientation=args.orientation)
     tasks = [t for t in args.tasks.split(",") if t] if args.tasks else None
-    report = replay_file(args.data, config=cfg, tasks=tasks, workers=args.workers)
+    report = replay_file(args.data, config=cfg, tasks=tasks, workers=args.workers, max_per_task=args.max_per_task)
     report["command"] = "tcot replay " + " ".join(argv)
     for task, c in report["per_task"].items():
         print(f"{task}: {c['successes']}/{c['demos']}")

@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tcot_hybrid.errors import CheckpointError, ConfigError, short_repr
-from tcot_hybrid.data.labels import GLOBAL_SPACINGS, SEGMENT_POINTS
+from tcot_hybrid.data.labels import GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POINTS
 from tcot_hybrid.jsonio import json_default as _json_default
 
 FORMAT = "tcot-planner-v1"
@@ -286,8 +286,9 @@ def _check_meta_types(meta: dict, where: str) -> None:
         if not isinstance(w, dict):
             raise bad("windows", "a JSON object")
         for k, v in w.items():
-            if k in ("global_spacing", "segment_points"):
-                choices = GLOBAL_SPACINGS if k == "global_spacing" else SEGMENT_POINTS
+            if k in ("global_spacing", "segment_points", "global_path"):
+                choices = {"global_spacing": GLOBAL_SPACINGS, "segment_points": SEGMENT_POINTS,
+                           "global_path": GLOBAL_PATHS}[k]
                 if v not in choices:
                     raise CheckpointError(f"{where}: windows.{k} must be one of {', '.join(map(repr, choices))}, "
                                           f"got {short_repr(v)}")

@@ -24,7 +24,9 @@ import numpy as np
 import torch
 
 from tcot_hybrid.data import open_demos
-from tcot_hybrid.data.labels import TrajectoryWindowConfig, global_labels, local_labels, track_from_arrays
+from tcot_hybrid.data.dataset import TCP_TARGET
+from tcot_hybrid.data.labels import (TrajectoryWindowConfig, commanded_track, global_labels, local_labels,
+                                     track_from_arrays)
 from tcot_hybrid.errors import DatasetError
 from tcot_hybrid.learning.vocab import Vocabulary
 
@@ -208,8 +210,15 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         rows, traj = keep(info, T)
         rows = rows & f.image_valid(name)  # a sample collected without an image is never a training frame
         track = track_from_arrays(arr)
-        gl, ll = global_labels(track, windows), local_labels(track, windows)
+        gtrack = track
+        if windows.global_path == "commanded":
+            if not f.has(name, TCP_TARGET):
+                raise DatasetError(f"{f.path}: {name} has no {TCP_TARGET} (collected before it was recorded), "
+                                   "which windows.global_path 'commanded' labels from; recollect or use 'observed'")
+            gtrack = commanded_track(track, f.read(name, [TCP_TARGET])[TCP_TARGET], camera)
+        gl, ll = global_labels(gtrack, windows), local_labels(track, windows)
         pos = arr["obs/robot0_eef_pos"].astype(np.float32)
+        gpos = gtrack.xyz_m.astype(np.float32)
         grip = arr["obs/robot0_gripper_closed"].astype(np.float32)
         ids, _, _ = vocab.encode(info.instruction, max_tokens)
         ahead = np.minimum(np.arange(T) + direct_horizon, T - 1)
@@ -219,7 +228,7 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         cols["prop"].append(np.c_[arr["obs/robot0_joint_pos"], grip].astype(np.float32)[r])
         cols["g"].append((gl.uv_px[r], gl.z_m[r] - zref, gl.gripper_closed[r].astype(np.float32)))
         cols["l"].append((ll.uv_px[r], ll.z_m[r] - zref, ll.gripper_closed[r].astype(np.float32)))
-        cols["gx"].append(pos[gl.indices[r]])
+        cols["gx"].append(gpos[gl.indices[r]])
         cols["lx"].append(pos[ll.indices[r]])
         rot6 = camera_rot6(camera, quat_wxyz_to_matrix(arr["obs/robot0_eef_quat"]))  # (T, 6)
         cols["gr"].append(rot6[gl.indices[r]])

@@ -1,0 +1,96 @@
+"""The label ceiling of the hard LIBERO tasks: each demonstration's own t = 0 global label run as a frozen plan
+(`tcot replay`, with the demo's TCP orientation, as a planner with a rotation head plans), for several label
+windows, written into docs/libero-planner.md's <!-- libero-label-ceiling --> section:
+
+    MUJOCO_GL=egl .venv/bin/python docs/libero-planner/label_ceiling.py [--summarize]
+
+Demonstrations: `tcot collect` of the six tasks below, training seeds 0-4 (docs/seeds.md; never the shipped init
+states), into runs/dev/cmd_demos.hdf5 (collected when missing; it records obs/tcp_target_pos, which the
+'commanded' windows label from). Each variant's report goes to docs/libero-planner/label-ceiling/<variant>.json and
+is reused when there (delete it to run that variant again).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+OUT = HERE / "label-ceiling"
+DATA = ROOT / "runs/dev/cmd_demos.hdf5"
+TASKS = [
+    "libero_10:KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it",
+    "libero_10:KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
+    "libero_10:KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it",
+    "libero_10:LIVING_ROOM_SCENE2_put_both_the_alphabet_soup_and_the_tomato_sauce_in_the_basket",
+    "libero_10:LIVING_ROOM_SCENE2_put_both_the_cream_cheese_box_and_the_butter_in_the_basket",
+    "libero_goal:open_the_top_drawer_and_put_the_bowl_inside",
+]
+SHORT = ["stove + moka", "bottom drawer + bowl", "microwave", "soup + tomato sauce", "cream cheese + butter",
+         "top drawer + bowl"]
+# (L_g, global_path, segment_points, points_per_segment); the first two: the shipped window and the v3 one
+VARIANTS = [(51, "observed", "length", 6), (97, "observed", "length", 6), (97, "observed", "length", 8),
+            (97, "observed", "corners", 6), (97, "observed", "corners", 8), (97, "commanded", "length", 6),
+            (97, "commanded", "length", 8), (97, "commanded", "corners", 6), (97, "commanded", "corners", 8)]
+
+
+def name(v) -> str:
+    return f"L{v[0]}_{v[1]}_{v[2]}_{v[3]}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--summarize", action="store_true", help="rewrite the docs section from the reports, run nothing")
+    ap.add_argument("--workers", type=int, default=2)
+    a = ap.parse_args()
+    if not a.summarize:
+        OUT.mkdir(exist_ok=True)
+        if not DATA.is_file():
+            subprocess.run([sys.executable, "-m", "tcot_hybrid.cli", "collect", "--tasks", ",".join(TASKS),
+                            "--episodes-per-task", "5", "--seed-start", "0", "--image-every", "30", "--workers",
+                            str(a.workers), "--quiet", "--out", str(DATA)], check=True, cwd=ROOT)
+        from tcot_hybrid.data.labels import TrajectoryWindowConfig
+        from tcot_hybrid.data.replay import ReplayConfig, replay_file
+
+        for v in VARIANTS:
+            path = OUT / f"{name(v)}.json"
+            if path.is_file():
+                continue
+            w = TrajectoryWindowConfig(L_g=v[0], L_l=1, n_l=1, global_spacing="events", global_path=v[1],
+                                       segment_points=v[2], points_per_segment=v[3])
+            report = replay_file(DATA, config=ReplayConfig(windows=w, orientation=True), workers=a.workers)
+            report["command"] = (f"tcot replay --data {DATA.relative_to(ROOT)} --global-spacing events --L-g {v[0]} "
+                                 f"--orientation --global-path {v[1]} --segment-points {v[2]} "
+                                 f"--points-per-segment {v[3]} --workers {a.workers}")
+            path.write_text(json.dumps(report, indent=1) + "\n")
+            print(f"{name(v)}: {report['success_rate']:.3f} ({report['wall_s']} s)")
+    write_section()
+
+
+def write_section() -> None:
+    from tcot_hybrid.markdown import update_readme_section
+
+    rows = []
+    for v in VARIANTS:
+        path = OUT / f"{name(v)}.json"
+        if not path.is_file():
+            continue
+        rep = json.loads(path.read_text())
+        cells = [f"{rep['per_task'][t]['successes']}/{rep['per_task'][t]['demos']}" if t in rep["per_task"] else "-"
+                 for t in TASKS]
+        n = sum(rep["per_task"][t]["successes"] for t in TASKS if t in rep["per_task"])
+        d = sum(rep["per_task"][t]["demos"] for t in TASKS if t in rep["per_task"])
+        rows.append(f"| {v[0]} | {v[1]} | {v[2]} | {v[3]} | " + " | ".join(cells) + f" | **{n}/{d}** |")
+    text = ("Label replays (`python docs/libero-planner/label_ceiling.py`; each demo's own t = 0 global label with its "
+            "orientation, one frozen global plan, no local replanning; 5 demos a task, training seeds 0-4; reports in "
+            "`docs/libero-planner/label-ceiling/`):\n\n"
+            "| L_g | path labelled | points placed by | points a piece | " + " | ".join(SHORT) + " | all |\n"
+            "|---|---|---|---|" + "---|" * (len(SHORT) + 1) + "\n" + "\n".join(rows))
+    update_readme_section(HERE.parent / "libero-planner.md", "libero-label-ceiling", text)
+
+
+if __name__ == "__main__":
+    main()
