@@ -133,6 +133,15 @@ def test_resume_refuses_changed_data_and_unreadable_state(demo_file, tmp_path, c
         train(_cfg(other, out, max_epochs=2), resume=True, progress=False, log=lambda *_: None)
     from tcot_hybrid.learning.train import resume_path
 
+    # a state written before a config field existed (one added with the old behaviour as its default) resumes
+    st = torch.load(resume_path(out), map_location="cpu", weights_only=True)
+    saved = json.loads(st["config"])
+    del saved["windows"]["segment_points"], saved["windows"]["global_path"]
+    st["config"] = json.dumps(saved)
+    torch.save(st, resume_path(out))
+    lines = []
+    train(_cfg(demo_file, out, max_epochs=2), resume=True, progress=False, log=lines.append)
+    assert any("resumed" in x and "after epoch 1 of 2" in x for x in lines)
     resume_path(out).write_bytes(b"not a state")
     with pytest.raises(ConfigError, match="cannot read the training state.*delete it"):
         train(_cfg(demo_file, out, max_epochs=2), resume=True, progress=False, log=lambda *_: None)

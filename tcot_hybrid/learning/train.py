@@ -70,7 +70,7 @@ def load_resume_state(cfg: TrainConfig, data_hash: str) -> dict | None:
         raise ConfigError(f"--resume: {str(path)!r} is not a training state of this version (format "
                           f"{st.get('format') if isinstance(st, dict) else type(st).__name__!r}, expected "
                           f"{RESUME_FORMAT!r}); delete it to start afresh")
-    saved, now = json.loads(st["config"]), _jsonable(cfg)
+    saved, now = _with_new_defaults(json.loads(st["config"])), _jsonable(cfg)
     diff = sorted(k for k in set(saved) | set(now) if k not in RESUME_FREE_FIELDS and saved.get(k) != now.get(k))
     if diff:
         k = diff[0]
@@ -86,6 +86,18 @@ def load_resume_state(cfg: TrainConfig, data_hash: str) -> dict | None:
 
 
 RESUME_FORMAT = "tcot-train-resume-1"
+
+
+def _with_new_defaults(saved: dict) -> dict:
+    """A saved run's config with the fields added to TrainConfig since it was written at their defaults (a field
+    added with the old behaviour as its default, e.g. windows.segment_points, does not make the run a different one);
+    as saved when it no longer reads as a TrainConfig (the comparison then names what differs)."""
+    from tcot_hybrid.config import from_mapping
+
+    try:
+        return _jsonable(from_mapping(TrainConfig, saved))
+    except (ConfigError, TypeError, ValueError):
+        return saved
 
 
 def run_finished(out: str | Path) -> bool:
