@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 ROOT = Path(__file__).resolve().parent.parent.parent
+SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+S4 = ",".join(SUITES)
 
 
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:
@@ -26,6 +28,17 @@ def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict]
                 rows.append(r)
     out.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     print(f"{len(rows)} episodes -> {out.relative_to(ROOT)}")
+
+
+def per_suite(eps: list[dict]) -> list[str]:
+    """Successes / episodes of ``eps`` in each of the four suites, as table cells."""
+    return [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}" for s in SUITES]
+
+
+def won_lost(base: dict, eps: list[dict]) -> str:
+    """"won / lost" of ``eps`` against ``base`` ((task, seed) -> success) on the layouts both ran."""
+    paired = [(base[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in base]
+    return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
 
 
 def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) -> list[str]:

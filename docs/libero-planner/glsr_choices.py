@@ -27,8 +27,7 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "glsr_choices.json"
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-S4 = ",".join(SUITES)
+SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-glsr-choices"
 
 OLD = "--sweep supervisor.t_f=16 --supervisor.empty-grasp off"

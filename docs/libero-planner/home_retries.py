@@ -18,8 +18,7 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "home_retries.json"
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-S4 = ",".join(SUITES)
+SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-home-retries"
 PERTURBS = "object_drop,object_moved"
 S3 = "libero_spatial,libero_object,libero_goal"  # under perturbation: the suites whose tasks start with one object

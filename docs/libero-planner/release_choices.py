@@ -18,8 +18,7 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "release_choices.json"
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-S4 = ",".join(SUITES)
+SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-release-choices"
 EVAL = f"tcot eval --suite {S4} --planners learned --modes global --init sampled --episodes 2 --seed-start 20000"
 # (run directory under runs/dev, checkpoint, what it is, command)
@@ -57,11 +56,8 @@ def lines() -> list[str]:
         eps = by_run.get(name)
         if not eps:
             continue
-        per = [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}"
-               for s in SUITES]
-        paired = [(base[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in base]
-        wl = "-" if name == RUNS[0][0] else (f"{sum(b and not a for a, b in paired)} / "
-                                              f"{sum(a and not b for a, b in paired)}")
+        per = dev_runs.per_suite(eps)
+        wl = "-" if name == RUNS[0][0] else dev_runs.won_lost(base, eps)
         out.append(f"| `{ck}` | {what} | " + " | ".join(per)
                    + f" | {sum(e['success'] for e in eps)}/{len(eps)} | {wl} |")
     out += dev_runs.command_lines("release_choices.py", 2, ((name, cmd) for name, _, _, cmd in RUNS))

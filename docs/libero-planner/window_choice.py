@@ -15,8 +15,7 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "window_choice.json"
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-S4 = ",".join(SUITES)
+SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-window-choice"
 EVAL = f"tcot eval --suite {S4} --planners learned --init sampled --episodes 2 --seed-start 20000"
 # (run, mode, checkpoint, command); the shipped checkpoint's runs first: the baseline of each mode
@@ -48,14 +47,11 @@ def lines() -> list[str]:
         eps = by.get((name, mode))
         if not eps:
             continue
-        res = {(e["task"], e["seed"]): e["success"] for e in eps}
-        base.setdefault(mode, res)
-        per = [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}" for s in SUITES]
-        b = base[mode]
-        common = set(b) & set(res)
-        wl = ("-" if b is res else
-              f"{sum(res[k] and not b[k] for k in common)} / {sum(b[k] and not res[k] for k in common)}")
-        out.append(f"| {ck} | {mode} | " + " | ".join(per) + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
+        first = mode not in base  # the shipped checkpoint's run: the baseline of its mode
+        base.setdefault(mode, {(e["task"], e["seed"]): e["success"] for e in eps})
+        wl = "-" if first else dev_runs.won_lost(base[mode], eps)
+        out.append(f"| {ck} | {mode} | " + " | ".join(dev_runs.per_suite(eps))
+                   + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
     return out + dev_runs.command_lines("window_choice.py", 2, dict((n, c) for n, _, _, c in RUNS).items())
 
 

@@ -14,6 +14,7 @@ so the scene is the one that was recorded; every other motion-stack setting is t
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import multiprocessing as mp
 import time
@@ -133,12 +134,9 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
         if t not in known:
             raise ConfigError(f"task {t!r} has no demo in {path}; its tasks: {', '.join(known)}")
     chosen = sorted((i for i in infos if i.success and (not tasks or i.task in tasks)), key=lambda i: (i.task, i.seed))
-    if max_per_task is not None:
-        kept: list = []
-        for i in chosen:
-            if sum(k.task == i.task for k in kept) < max_per_task:
-                kept.append(i)
-        chosen = kept
+    if max_per_task is not None:  # sorted by task: each task's first max_per_task seeds
+        chosen = [i for _, group in itertools.groupby(chosen, key=lambda i: i.task)
+                  for i in itertools.islice(group, max_per_task)]
     names = [i.name for i in chosen]
     if not names:
         raise ConfigError(f"no successful demo to replay in {path}")
