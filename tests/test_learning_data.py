@@ -110,3 +110,16 @@ def test_per_demo_file_without_a_demo_camera_is_refused(tmp_path, camera):
         del h5["data/demo_1"].attrs["T_world_cam"]
     with pytest.raises(DatasetError, match=r"demo_1 lacks attribute\(s\) \['T_world_cam'\]"):
         open_demos(path)
+
+
+def test_suites_keep_only_their_demos_and_a_missing_suite_is_named(tmp_path, camera):
+    path = tmp_path / "two_suites.hdf5"
+    make_demo_file(path, camera, seeds=range(12), episode=lambda s: {"suite": "libero_10" if s % 3 else "libero_goal"})
+    every = load_frames(path, "all", VOCAB, **KW)
+    long_only = load_frames(path, "all", VOCAB, suites=("libero_10",), **KW)
+    with open_demos(path) as f:
+        want = sorted(n for n in f.mask("train") + f.mask("valid") if f.info(n).suite == "libero_10")
+    assert sorted(long_only.demos) == want and 0 < len(want) < len(every.demos)
+    assert sorted(load_frames(path, "all", VOCAB, suites=("libero_10", "libero_goal"), **KW).demos) == sorted(every.demos)
+    with pytest.raises(DatasetError, match=r"\['libero_spatial'\].*\['libero_10', 'libero_goal'\]"):
+        load_frames(path, "train", VOCAB, suites=("libero_spatial",), **KW)

@@ -293,6 +293,17 @@ def test_libero_configs_share_model_windows_and_height_reference():
     assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
 
 
+def test_libero_10_model_continues_the_97_point_model_on_its_suite_alone():
+    root = Path(__file__).resolve().parent.parent / "examples" / "configs"
+    v3, long_suite = (load_train_config(root / f"train_libero{x}.yaml") for x in ("_v3", "10"))
+    assert long_suite.suites == ("libero_10",) and v3.suites == ()
+    assert long_suite.init == v3.out and long_suite.out not in (v3.out, v3.init)
+    assert (long_suite.model, long_suite.windows, long_suite.height_ref, long_suite.data) == \
+        (v3.model, v3.windows, v3.height_ref, v3.data)
+    with pytest.raises(ConfigError, match="suites"):
+        TrainConfig(suites="libero_10")  # a bare string would be read as its letters
+
+
 def test_cmd_train_missing_data_is_clear(tmp_path):
     with pytest.raises(ConfigError, match="does not exist.*--collect"):
         cmd_train(["--data", str(tmp_path / "none.hdf5"), "--out", str(tmp_path / "x.safetensors")])

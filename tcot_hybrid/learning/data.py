@@ -116,14 +116,17 @@ def file_hash(path: str | Path, *, chunk: int = 1 << 22) -> str:
 
 def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                 max_tokens: int, direct_horizon: int, max_demos: int | None = None,
-                successful_only: bool = True, frame_stride: int = 1, height_ref: str = "world") -> FrameSet:
+                successful_only: bool = True, frame_stride: int = 1, height_ref: str = "world",
+                suites: tuple[str, ...] = ()) -> FrameSet:
     """Read split ``train``/``valid`` (or ``all``: both) of demo file ``path`` into memory with every label
     computed. Only successful demos carry trajectory labels worth imitating; ``successful_only`` drops the rest.
     ``frame_stride`` keeps every k-th frame of each demo (t = 0 always; labels still come from the whole track).
+    ``suites`` keeps only the demos of those suites (empty: all).
     """
     with open_demos(path) as f:
         names = f.mask("train") + f.mask("valid") if split == "all" else f.mask(split)
-        infos = [f.info(n) for n in names]
+        infos = of_suites(f, [f.info(n) for n in names], suites, path)
+        names = [i.name for i in infos]
         if successful_only:
             names = [i.name for i in infos if i.success]
         if max_demos is not None:
@@ -135,13 +138,25 @@ def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: Tra
                             height_ref=height_ref)
 
 
-def online_split_size(path: str | Path, split: str) -> int:
+def of_suites(f, infos: list, suites: tuple[str, ...], path: str | Path) -> list:
+    """The infos (of open file ``f``) of ``suites``: all of them when empty. A suite the file holds no demo of
+    is refused, naming the file's suites: a misspelt suite would otherwise train on nothing of it."""
+    if not suites:
+        return infos
+    present = sorted({i.suite for i in f.infos()})
+    missing = [s for s in suites if s not in present]
+    if missing:
+        raise DatasetError(f"data file {path}: no demos of suite(s) {missing}; it holds {present}")
+    return [i for i in infos if i.suite in suites]
+
+
+def online_split_size(path: str | Path, split: str, suites: tuple[str, ...] = ()) -> int:
     """Episodes of online file ``path`` in ``split`` (by seed, as :func:`load_online_frames` splits them): a file of
     one seed per task (e.g. one rollout per task and perturbation) falls wholly into one split."""
     if split not in ("train", "valid"):
         raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
     with open_demos(path) as f:
-        return len(_split_infos(f, split))
+        return len(of_suites(f, _split_infos(f, split), suites, path))
 
 
 def _split_infos(f, split: str) -> list:
@@ -153,16 +168,17 @@ def _split_infos(f, split: str) -> list:
 
 
 def load_online_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
-                       max_tokens: int, direct_horizon: int, frame_stride: int = 1, height_ref: str = "world") -> FrameSet:
+                       max_tokens: int, direct_horizon: int, frame_stride: int = 1, height_ref: str = "world",
+                       suites: tuple[str, ...] = ()) -> FrameSet:
     """Online episodes of ``path`` (split by seed like the demos, failed episodes included), every
     ``frame_stride``-th frame plus every success frame (and every frame of the first
     ``RECOVERY_DENSE_STEPS`` of a recovery): all for failure detection; those of successful
     oracle episodes from their first plan after the perturbation on (``recover_step``) also carry trajectory
-    labels (recovery demonstrations)."""
+    labels (recovery demonstrations). ``suites`` keeps only the episodes of those suites (empty: all)."""
     if split not in ("train", "valid"):
         raise DatasetError(f"split must be 'train' or 'valid', got {split!r}")
     with open_demos(path) as f:
-        names = [i.name for i in _split_infos(f, split)]
+        names = [i.name for i in of_suites(f, _split_infos(f, split), suites, path)]
         if not names:
             raise DatasetError(f"online data file {path}: split {split!r} has no episodes")
 

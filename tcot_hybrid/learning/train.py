@@ -143,10 +143,11 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     if int(env["height"]) != int(env["width"]):
         raise ConfigError(f"planner images must be square, data has {env['width']}x{env['height']}")
     load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon,
-                height_ref=cfg.height_ref)
+                height_ref=cfg.height_ref, suites=cfg.suites)
     tr = load_frames(cfg.data, "train", vocab, max_demos=cfg.max_train_demos, **load)
     va = load_frames(cfg.data, "valid", vocab, **load)
-    log(f"data {cfg.data}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
+    of = f" (suites {', '.join(cfg.suites)})" if cfg.suites else ""
+    log(f"data {cfg.data}{of}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
     data_files = [cfg.data, *cfg.extra_data, *cfg.online_data]
     trs, vas = [tr], [va]
@@ -160,14 +161,14 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
         vas.append(ex_va)
     for path in cfg.online_data:
         _check_same_env(env, env_of(path)[0], path, cfg.data)
-        if online_split_size(path, "train") == 0:
+        if online_split_size(path, "train", cfg.suites) == 0:
             raise DatasetError(f"online data file {path}: no episode falls in the training split (seed % "
                                f"valid_every != 0); collect it with other seeds or another --valid-every")
         on_tr = load_online_frames(path, "train", vocab, frame_stride=cfg.online_frame_stride, **load)
         trs.append(on_tr)
         # a file of one seed per task lies wholly in one split: validation then rests on the other files
         on_va = (load_online_frames(path, "valid", vocab, frame_stride=cfg.online_frame_stride, **load)
-                 if online_split_size(path, "valid") else None)
+                 if online_split_size(path, "valid", cfg.suites) else None)
         log(f"online data {path}: {len(on_tr.demos)} train episodes / {len(on_tr)} frames "
             f"({int(on_tr.traj.sum())} with recovery trajectories, {int(on_tr.success.sum())} success), "
             + (f"{len(on_va.demos)} valid episodes / {len(on_va)} frames" if on_va is not None

@@ -77,6 +77,10 @@ class TrainConfig:
                      episodes after their perturbation [paths]
     online_frame_stride: keep every k-th frame of an online episode (neighbouring frames are nearly
                      identical; success frames are always kept). Up: less memory and load time, less data.
+    suites:          train and validate on the demos (and online episodes) of these suites only, e.g.
+                     ``[libero_10]`` for one model per LIBERO suite (the paper's TCoT row; its TCoT-Multi row is one
+                     model for all four); empty = every demo. The vocabulary still comes from every training
+                     instruction of ``data``, so a suite model can start from (``init``) a model of all suites.
     init:            start from this checkpoint's weights (same data vocabulary and model shape), e.g. stage 2
                      on online rollouts after a stage-1 run [path]; None = random init.
     out:             checkpoint to write (``.safetensors``; ``.json`` metadata and ``.metrics.jsonl`` next to it)
@@ -133,6 +137,7 @@ class TrainConfig:
     extra_frame_stride: int = 1
     online_data: tuple[str, ...] = ()
     online_frame_stride: int = 2
+    suites: tuple[str, ...] = ()
     init: str | None = None
     out: str = "runs/train/planner.safetensors"
     kind: str = "trajectory"
@@ -173,7 +178,10 @@ class TrainConfig:
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
         require_int("detect_ignore_before_success", self.detect_ignore_before_success, minimum=0)
-        for name in ("extra_data", "online_data"):  # YAML gives a list
+        if isinstance(self.suites, str):
+            raise ConfigError(f"suites must be a list of suite names, got the string {self.suites!r} "
+                              f"(write [{self.suites}])")
+        for name in ("extra_data", "online_data", "suites"):  # YAML gives a list
             object.__setattr__(self, name, tuple(str(p) for p in getattr(self, name)))
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
