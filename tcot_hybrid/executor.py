@@ -69,6 +69,12 @@ class ExecutorConfig:
                       between points, and a place descent starting 2-3 cm to the side brought a carried cube
                       down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
                       unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
+    release_retreat_m: a plan whose last gripper switch is a release and which ends there (its last point within
+                      ``RETREAT_NEAR_M`` above the release) gets one more point this far straight up from its last:
+                      demonstrations end a few steps after the release, so learned plans do too, and the fingers
+                      stay around what they let go (a sauce bottle released into a basket leant on them, tilted,
+                      and stayed in the hand's grip to the time limit; docs/libero-planner.md, "Leaving a
+                      release"). Oracle plans already leave straight up. None (YAML null) = off. [m]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
                       the twin is solved from the same seed and taken when it converges where the other missed by
@@ -90,6 +96,7 @@ class ExecutorConfig:
     transit_min_horizontal_m: float | None = 0.06
     transit_min_vertical_m: float = 0.02
     switch_min_horizontal_m: float | None = 0.005
+    release_retreat_m: float | None = 0.08
     hand_twin: bool = True
 
     def __post_init__(self) -> None:
@@ -99,6 +106,8 @@ class ExecutorConfig:
             require_positive("transit_min_horizontal_m (or null: off)", self.transit_min_horizontal_m)
         if self.switch_min_horizontal_m is not None:
             require_positive("switch_min_horizontal_m (or null: off)", self.switch_min_horizontal_m)
+        if self.release_retreat_m is not None:
+            require_positive("release_retreat_m (or null: off)", self.release_retreat_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -141,6 +150,31 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     if return_source:
         return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_src, int)
     return np.asarray(out_p), np.asarray(out_g, bool)
+
+
+RETREAT_NEAR_M = 0.03  # a plan ending this close above its release has not left it [m]
+
+
+def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarray, *, lift_m: float | None):
+    """``points`` and ``grip`` with one point ``lift_m`` straight above the last appended when the plan's last
+    gripper switch is a release (closed to open; ``start_closed`` is the gripper command before the first point)
+    and the plan ends within ``RETREAT_NEAR_M`` above where it released; also each output point's plan index (the
+    added one takes the last point's orientation). Pure function; unchanged arrays when ``lift_m`` is None, the
+    plan has no release or already leaves it."""
+    points = np.asarray(points, float)
+    grip = np.asarray(grip, bool)
+    source = np.arange(len(points))
+    if lift_m is None or not len(points):
+        return points, grip, source
+    prev = np.r_[bool(start_closed), grip[:-1]]
+    switches = np.flatnonzero(prev != grip)
+    if not len(switches) or grip[switches[-1]]:
+        return points, grip, source
+    released_at = points[switches[-1]]
+    if points[-1, 2] - released_at[2] > RETREAT_NEAR_M:
+        return points, grip, source
+    above = points[-1] + np.array([0.0, 0.0, lift_m])
+    return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
 _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a parallel-jaw hand's twin
@@ -215,12 +249,16 @@ class MotionExecutor:
         grip = np.asarray(plan.gripper_closed, bool)
         rots = np.broadcast_to(R_DOWN, (len(plan), 3, 3)) if plan.tcp_rot is None else plan.tcp_rot
         cfg = self.config
+        retreat = False
         if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
             points, grip, source = square_transits(
                 self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
                 switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
-            rots = rots[source]
+            points, grip, last = retreat_after_release(self.sim.gripper_closed_cmd(), points, grip,
+                                                       lift_m=cfg.release_retreat_m)
+            retreat = len(last) > len(source)
+            rots = rots[source[last]]
         rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q
@@ -241,7 +279,7 @@ class MotionExecutor:
                 self._brake_inside_limits(q, self.sim.qd, "resync")
             self._ik_seed = q
         self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan),
-                   corners_added=len(points) - len(plan))
+                   corners_added=len(points) - len(plan) - retreat, retreat_added=retreat)
         self._activate(0)
         return True
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.executor import ExecutorConfig, square_transits
+from tcot_hybrid.executor import RETREAT_NEAR_M, ExecutorConfig, retreat_after_release, square_transits
 
 H, V = 0.06, 0.02  # the thresholds these tests use
 
@@ -261,3 +261,41 @@ def test_go_home_rises_straight_up_then_returns_to_the_starting_posture():
     path = np.array(path)
     top = int(np.argmax(path[:, 2] > start[2] + 0.09))  # first tick 9 cm above where it started
     assert top > 0 and np.linalg.norm(path[:top, :2] - start[:2], axis=1).max() < 0.02  # straight up first
+
+
+def test_a_plan_ending_at_its_release_leaves_it_straight_up():
+    pts = np.array([[0.5, 0.0, 0.3], [0.5, 0.0, 0.1], [0.6, 0.1, 0.2], [0.6, 0.1, 0.12]])
+    grip = np.array([False, True, True, False])  # grasp, carry, release at the last point
+    out, g, src = retreat_after_release(False, pts, grip, lift_m=0.08)
+    assert len(out) == 5 and not g[-1] and src.tolist() == [0, 1, 2, 3, 3]
+    np.testing.assert_allclose(out[:4], pts)
+    np.testing.assert_allclose(out[-1], pts[-1] + [0, 0, 0.08])
+    # the release's own height counts, not the last point's: a plan that ends a little above it still gets the lift
+    ends_near = np.vstack([pts, pts[-1] + [0.01, 0, RETREAT_NEAR_M / 2]])
+    assert len(retreat_after_release(False, ends_near, np.r_[grip, False], lift_m=0.08)[0]) == 6
+
+
+@pytest.mark.parametrize("case", ["already_leaves", "no_release", "last_switch_a_grasp", "off"])
+def test_no_retreat_where_the_plan_leaves_or_lets_go_of_nothing(case):
+    pts = np.array([[0.5, 0.0, 0.3], [0.5, 0.0, 0.1], [0.6, 0.1, 0.12]])
+    grip, start_closed, lift = np.array([False, True, False]), False, 0.08
+    if case == "already_leaves":
+        pts, grip = np.vstack([pts, pts[-1] + [0, 0, RETREAT_NEAR_M + 0.01]]), np.r_[grip, False]
+    elif case == "no_release":  # open before the plan and throughout: what it let go of was an earlier plan's
+        grip = np.array([False, False, False])
+    elif case == "last_switch_a_grasp":
+        grip = np.array([False, False, True])
+    else:
+        lift = None
+    out, g, src = retreat_after_release(start_closed, pts, grip, lift_m=lift)
+    np.testing.assert_array_equal(out, pts)
+    np.testing.assert_array_equal(g, grip)
+    assert src.tolist() == list(range(len(pts)))
+
+
+def test_a_release_at_the_first_point_counts_from_the_gripper_command_before_the_plan():
+    pts = np.array([[0.6, 0.1, 0.12], [0.6, 0.1, 0.13]])
+    out, _, _ = retreat_after_release(True, pts, np.array([False, False]), lift_m=0.05)
+    np.testing.assert_allclose(out[-1], pts[-1] + [0, 0, 0.05])
+    with pytest.raises(ConfigError, match="release_retreat_m"):
+        ExecutorConfig(release_retreat_m=0.0)
