@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
 .PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval libero-planner-perturb \
-	libero-protocol clean
+	libero-protocol libero-protocol-suite clean
 
 $(BIN)/tcot: pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -204,6 +204,16 @@ libero-protocol: setup
 	$(call libero_protocol_row,learned,local,50)
 	$(call libero_protocol_row,learned,glsr_reset,50)
 	$(call libero_protocol_row,direct,global,2)
+	$(BIN)/python docs/libero-planner/protocol.py
+
+# One model per suite (the paper's TCoT row): GLSR on the suites that ship their own model (libero_10)
+PROTOCOL_SUITE := docs/libero-planner/eval-protocol-suite
+libero-protocol-suite: setup
+	mkdir -p $(PROTOCOL_SUITE)
+	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(PROTOCOL_SUITE)/eval-learned-glsr.commit
+	$(BIN)/tcot eval --suite libero_10 --planners learned --modes glsr --init shipped --episodes 50 --seed-start 0 \
+		--workers 2 --checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors --out $(PROTOCOL_SUITE)
+	cp $(PROTOCOL_SUITE)/eval.json $(PROTOCOL_SUITE)/eval-learned-glsr.json
 	$(BIN)/python docs/libero-planner/protocol.py
 
 clean:

@@ -24,6 +24,10 @@ from tcot_hybrid.metrics import wilson_interval
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 EVAL = HERE / "eval-protocol"
+# One model per suite (the paper's TCoT row; the rows above are one model for all four, its TCoT-Multi): GLSR with
+# each suite's own shipped model, one folder for all of them (Makefile libero-protocol-suite)
+SUITE_EVAL = HERE / "eval-protocol-suite"
+SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; only libero_10 has one: `libero_panda_libero_10`)"
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
@@ -52,7 +56,7 @@ def _read(path: Path) -> list[dict]:
     return [json.loads(x) for x in path.read_text().splitlines() if x.strip()] if path.is_file() else []
 
 
-def _records() -> list[dict]:
+def _records(folder: Path = EVAL) -> list[dict]:
     """The episodes, trimmed to the fields these tables use. ``tcot eval``'s episodes.jsonl (every event of every
     episode, 50 MB a row, kept out of git: it is what a resumed run reads) is merged into records.jsonl (committed):
     an episode in both is taken from episodes.jsonl, and rows only records.jsonl holds (a row run on another machine
@@ -60,14 +64,14 @@ def _records() -> list[dict]:
     def key(r: dict) -> tuple:
         return r["task"], r["planner"], r["mode"], r["perturb"], r["seed"]
 
-    merged = {key(r): r for r in _read(EVAL / "records.jsonl")}
-    full = _read(EVAL / "episodes.jsonl")
+    merged = {key(r): r for r in _read(folder / "records.jsonl")}
+    full = _read(folder / "episodes.jsonl")
     if not full:
         return list(merged.values())
     merged.update({key(r): r for r in ({k: e.get(k) for k in RECORD_FIELDS} for e in full)})
     records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
                                                      r["seed"]))
-    (EVAL / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    (folder / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records
 
 
@@ -109,11 +113,11 @@ def _average(got: dict[str, list[int]]) -> str:
     return f"**{k / n:.3f}** [{lo:.2f}, {hi:.2f}] n={n}"
 
 
-def _provenance(planner: str, mode: str) -> str | None:
+def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     """How a row's last run went (eval-<planner>-<mode>.json, written when it finished) and the commit it ran at
     (eval-<planner>-<mode>.commit, written when it started)."""
     parts = []
-    p = EVAL / f"eval-{planner}-{mode}.json"
+    p = folder / f"eval-{planner}-{mode}.json"
     if p.is_file():
         r = json.loads(p.read_text())
         parts.append(f"{r['ran_now']} episodes in {r['wall_time_s'] / 60:.1f} min wall with {r['workers']} workers"
@@ -145,6 +149,11 @@ def table1_lines(by) -> list[str]:
             partial += f" (init states 0-{planned // 10 - 1} of each task)"
         lines.append(f"| ours: {label}{partial} | "
                      + " | ".join(rate(*got[s]) for s in SUITES) + f" | {_average(got)} |")
+    suite_eps = [e for e in _records(SUITE_EVAL) if e["perturb"] == "none" and e["mode"] == "glsr"]
+    if suite_eps:
+        got = _suite_counts(suite_eps)
+        lines.append(f"| ours: {SUITE_ROW} | " + " | ".join(rate(*got[s]) if got[s][1] else "-" for s in SUITES)
+                     + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
     if oracle:
         lines.append("| oracle: privileged script (`docs/eval-libero/oracle-shipped/`) | "
@@ -171,6 +180,10 @@ def table1_lines(by) -> list[str]:
                      + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
+    if suite_eps:
+        how = ", ".join(x for x in (f"{len(suite_eps)} episodes", _provenance("learned", "glsr", SUITE_EVAL)) if x)
+        lines.append(f"- {SUITE_ROW.split(' (')[0]} (`docs/libero-planner/eval-protocol-suite/`): {how}; "
+                     f"{sum(bool(e['fault']) for e in suite_eps)} faulted, none counted as a success.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
