@@ -155,6 +155,11 @@ else
 	$(call libero_train_resumable,train_libero_v2,planner_v2,train_v2,--data data/demos_libero_panda.hdf5)
 	cp runs/libero/planner_v2.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner_v2.json tcot_hybrid/checkpoints/libero_panda_default.json
+	# libero_10's own model (the paper's TCoT row: one model per suite): the 97-point window, then libero_10 alone
+	$(call libero_train_resumable,train_libero_v3,planner_v3,train_v3,)
+	$(call libero_train_resumable,train_libero10,planner_libero10,train_libero10,)
+	cp runs/libero/planner_libero10.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
+	cp runs/libero/planner_libero10.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
 endif
 	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
 		|| (tail -5 runs/libero/direct_train.log; exit 1)
