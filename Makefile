@@ -196,12 +196,14 @@ libero-planner-perturb: setup
 # tcot eval per row into one folder (resumable); each run's eval.json is kept as eval-<planner>-<mode>.json (its wall
 # time) and the commit it ran at as eval-<planner>-<mode>.commit. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
+# $(1) planner, $(2) mode, $(3) episodes per task; optional $(4) folder (default $(PROTOCOL)), $(5) suites (default
+# the four), $(6) further tcot eval flags
 define libero_protocol_row
-	mkdir -p $(PROTOCOL)
-	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(PROTOCOL)/eval-$(1)-$(2).commit
-	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
-		--seed-start 0 --workers 2 --out $(PROTOCOL)
-	cp $(PROTOCOL)/eval.json $(PROTOCOL)/eval-$(1)-$(2).json
+	mkdir -p $(or $(4),$(PROTOCOL))
+	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).commit
+	$(BIN)/tcot eval --suite $(or $(5),$(LIBERO_SUITES)) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
+		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
+	cp $(or $(4),$(PROTOCOL))/eval.json $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).json
 endef
 libero-protocol: setup
 	$(call libero_protocol_row,learned,glsr,50)
@@ -214,11 +216,8 @@ libero-protocol: setup
 # One model per suite (the paper's TCoT row): GLSR on the suites that ship their own model (libero_10)
 PROTOCOL_SUITE := docs/libero-planner/eval-protocol-suite
 libero-protocol-suite: setup
-	mkdir -p $(PROTOCOL_SUITE)
-	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(PROTOCOL_SUITE)/eval-learned-glsr.commit
-	$(BIN)/tcot eval --suite libero_10 --planners learned --modes glsr --init shipped --episodes 50 --seed-start 0 \
-		--workers 2 --checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors --out $(PROTOCOL_SUITE)
-	cp $(PROTOCOL_SUITE)/eval.json $(PROTOCOL_SUITE)/eval-learned-glsr.json
+	$(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_SUITE),libero_10,\
+		--checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors)
 	$(BIN)/python docs/libero-planner/protocol.py
 
 clean:

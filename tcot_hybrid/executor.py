@@ -73,8 +73,9 @@ class ExecutorConfig:
                       ``RETREAT_NEAR_M`` above the release) gets one more point this far straight up from its last:
                       demonstrations end a few steps after the release, so learned plans do too, and the fingers
                       stay around what they let go (a sauce bottle released into a basket leant on them, tilted,
-                      and stayed in the hand's grip to the time limit; docs/libero-planner.md, "Leaving a
-                      release"). Oracle plans already leave straight up. None (YAML null) = off. [m]
+                      and stayed in the hand's grip to the time limit; docs/libero-planner.md, "The long suite:
+                      its own model, and leaving a release"). Oracle plans already leave straight up. None (YAML
+                      null) = off. [m]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
                       the twin is solved from the same seed and taken when it converges where the other missed by
