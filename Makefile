@@ -205,19 +205,30 @@ define libero_protocol_row
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
 	cp $(or $(4),$(PROTOCOL))/eval.json $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).json
 endef
+# The learned rows are the paper's TCoT-Multi row: the one model for all four suites, named (a suite that ships its
+# own model would otherwise load that one)
+MULTI_MODEL := --checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors
 libero-protocol: setup
-	$(call libero_protocol_row,learned,glsr,50)
-	$(call libero_protocol_row,learned,global,50)
-	$(call libero_protocol_row,learned,local,50)
-	$(call libero_protocol_row,learned,glsr_reset,50)
+	$(call libero_protocol_row,learned,glsr,50,,,$(MULTI_MODEL))
+	$(call libero_protocol_row,learned,global,50,,,$(MULTI_MODEL))
+	$(call libero_protocol_row,learned,local,50,,,$(MULTI_MODEL))
+	$(call libero_protocol_row,learned,glsr_reset,50,,,$(MULTI_MODEL))
 	$(call libero_protocol_row,direct,global,2)
 	$(BIN)/python docs/libero-planner/protocol.py
 
-# One model per suite (the paper's TCoT row): GLSR on the suites that ship their own model (libero_10)
+# One model per suite (the paper's TCoT row): GLSR on each suite that ships its own model
+# (tcot_hybrid/checkpoints/libero_panda_<suite>.safetensors, which that suite's tasks load by default), one folder
+# per suite under $(PROTOCOL_SUITE)
 PROTOCOL_SUITE := docs/libero-planner/eval-protocol-suite
+SUITE_MODELS := $(patsubst tcot_hybrid/checkpoints/libero_panda_%.safetensors,%,\
+	$(filter-out %default.safetensors,$(wildcard tcot_hybrid/checkpoints/libero_panda_*.safetensors)))
+define suite_protocol_row
+$(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_SUITE)/$(1),$(1),\
+	--checkpoint tcot_hybrid/checkpoints/libero_panda_$(1).safetensors)
+
+endef
 libero-protocol-suite: setup
-	$(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_SUITE),libero_10,\
-		--checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors)
+	$(foreach s,$(SUITE_MODELS),$(call suite_protocol_row,$(s)))
 	$(BIN)/python docs/libero-planner/protocol.py
 
 clean:

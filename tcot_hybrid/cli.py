@@ -126,6 +126,7 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
     from tcot_hybrid import __version__
     from tcot_hybrid.episode import file_digest
     from tcot_hybrid.planners import planner_checkpoint
+    from tcot_hybrid.tasks import make_task
 
     def digest(path_of):
         try:
@@ -141,7 +142,8 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
             "fault": f"not started: {type(exc).__name__}: {exc}", "sim_time_s": 0.0, "wall_time_s": 0.0,
             "steps": 0, "plans": 0, "perturb": cfg.perturb.name, "events": [], "config": cfg.to_dict(),
             "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
-            "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint)),
+            "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint,
+                                                                  suite=make_task(cfg.task).suite)),
             "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
                          "python": platform.python_version()}}
 

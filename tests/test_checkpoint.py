@@ -323,6 +323,40 @@ def test_libero_robot_without_a_shipped_checkpoint_points_to_make_libero_planner
         default_checkpoint("libero_panda")
 
 
+def test_a_suite_with_its_own_shipped_model_gets_it_and_the_others_the_default(tmp_path, monkeypatch):
+    """The paper's TCoT row is one model per suite: a task of a suite that ships ``<robot>_<suite>`` loads it, any
+    other suite (or none) the robot's default; an explicit --checkpoint wins over both."""
+    import tcot_hybrid.learning.checkpoint as ck
+    from tcot_hybrid.planners import planner_checkpoint
+
+    monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
+    for stem in ("libero_panda_default", "libero_panda_libero_10", "libero_panda_direct_default"):
+        (tmp_path / f"{stem}.safetensors").write_bytes(b"")
+    assert default_checkpoint("libero_panda", suite="libero_10").name == "libero_panda_libero_10.safetensors"
+    assert default_checkpoint("libero_panda", suite="libero_goal").name == "libero_panda_default.safetensors"
+    assert default_checkpoint("libero_panda").name == "libero_panda_default.safetensors"
+    assert default_checkpoint("libero_panda", "direct", suite="libero_10").name == \
+        "libero_panda_direct_default.safetensors"
+    assert planner_checkpoint("learned", "libero_panda", None, suite="libero_10").name == \
+        "libero_panda_libero_10.safetensors"
+    assert planner_checkpoint("learned", "libero_panda", tmp_path / "mine.safetensors", suite="libero_10") == \
+        tmp_path / "mine.safetensors"
+    assert planner_checkpoint("oracle", "libero_panda", None, suite="libero_10") is None
+
+
+def test_every_shipped_suite_model_was_trained_on_that_suite_alone():
+    """A shipped ``libero_panda_<suite>`` is what tasks of <suite> load by default: its training config must name
+    that suite and no other (the file name is the only link between the two)."""
+    from tcot_hybrid.learning.checkpoint import checkpoints_dir
+
+    own = [p for p in checkpoints_dir().glob("libero_panda_*.safetensors")
+           if not p.stem.endswith("default")]
+    assert own, "no suite model is shipped"
+    for p in own:
+        suite = p.stem.removeprefix("libero_panda_")
+        assert json.loads(meta_path(p).read_text())["train_config"]["suites"] == [suite], p.name
+
+
 def test_shipped_libero_checkpoint_is_small_and_made_for_libero():
     """`--planner learned` on a LIBERO task loads the libero_panda default: a LIBERO checkpoint (world, per-scene
     camera, heights from the camera, a rotation head) for the bundled libero_panda's model, under 10 MB."""

@@ -11,6 +11,8 @@ from typing import Callable, Iterable
 ROOT = Path(__file__).resolve().parent.parent.parent
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 S4 = ",".join(SUITES)
+# The four-suite model, named: without --checkpoint a suite that ships its own model (libero_10) loads that one
+FOUR_SUITE_MODEL = "--checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors"
 
 
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:

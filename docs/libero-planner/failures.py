@@ -166,7 +166,11 @@ def run_one(task: str, seed: int, mode: str | None, confirm: str = "off", stop_o
     from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.supervision import SupervisorConfig
 
+    from tcot_hybrid.learning.checkpoint import default_checkpoint
+
+    # the four-suite model, named: a suite that ships its own model would otherwise load that one
     cfg = RunConfig(task=task, seed=seed, init="sampled", planner="learned", stop_on=stop_on,
+                    checkpoint=str(default_checkpoint("libero_panda")),
                     supervisor=SupervisorConfig(mode=mode or "global", confirm_success=confirm))
     info: dict = {"task": task, "suite": task.split(":")[0], "seed": seed, "mode": mode,
                   "confirm": confirm if mode and mode.startswith("glsr") else None,
@@ -285,7 +289,7 @@ def key(r: dict) -> tuple:
 
 
 def shipped_checkpoint_hash() -> str:
-    """Hash of the checkpoint ``--planner learned`` loads on LIBERO (records are kept per checkpoint)."""
+    """Hash of the four-suite checkpoint these records study (records are kept per checkpoint)."""
     from tcot_hybrid.episode import file_digest
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 

@@ -58,7 +58,10 @@ def probe(task: str, seed: int, move_m: float, spread_layouts: int) -> dict | No
     from tcot_hybrid.perturbations import _first_open_skill, _relocate
     from tcot_hybrid.run_config import RunConfig
 
-    runner = EpisodeRunner(RunConfig(task=task, seed=seed, init="sampled", planner="learned"))
+    from tcot_hybrid.learning.checkpoint import default_checkpoint
+
+    runner = EpisodeRunner(RunConfig(task=task, seed=seed, init="sampled", planner="learned",
+                                     checkpoint=str(default_checkpoint("libero_panda"))))  # the four-suite model
     runner.settle()
     world = runner.stack.sim.world
     g0, skill = first_grasp(runner, 0), _first_open_skill(runner)

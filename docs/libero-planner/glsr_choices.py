@@ -30,17 +30,17 @@ OUT = HERE / "glsr_choices.json"
 SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-glsr-choices"
 
-OLD = "--sweep supervisor.t_f=16 --supervisor.empty-grasp off"
+OLD = f"--sweep supervisor.t_f=16 --supervisor.empty-grasp off {dev_runs.FOUR_SUITE_MODEL}"
 # (run directory under runs/dev, setting label, command)
 RUNS = (
     ("tf16", "t_f = 16, no empty-grasp check",
      f"tcot eval --suite {S4} --planners learned --modes global,glsr --init sampled --episodes 2 --seed-start 20000 {OLD}"),
     ("tf1000", "t_f = 1000, no empty-grasp check",
      f"tcot eval --suite {S4} --planners learned --modes glsr --init sampled --episodes 2 --seed-start 20000 "
-     "--sweep supervisor.t_f=1000 --supervisor.empty-grasp off"),
+     f"--sweep supervisor.t_f=1000 --supervisor.empty-grasp off {dev_runs.FOUR_SUITE_MODEL}"),
     ("eg3_goal10", "t_f = plan, empty-grasp check (first version)",
      "tcot eval --suite libero_goal,libero_10 --planners learned --modes glsr --init sampled --episodes 2 "
-     "--seed-start 20000"),
+     f"--seed-start 20000 {dev_runs.FOUR_SUITE_MODEL}"),
     ("pert_tf16", "t_f = 16, no empty-grasp check",
      "tcot eval --suite libero_spatial,libero_object --planners learned --modes global,glsr "
      f"--perturb object_moved,object_drop --init sampled --episodes 1 --seed-start 20000 {OLD}"),

@@ -25,7 +25,7 @@ S3 = "libero_spatial,libero_object,libero_goal"  # under perturbation: the suite
 # (run directory under runs/dev, home retries, command)
 RUNS = tuple(
     (f"{prefix}home{n}", n, f"tcot eval --suite {suites} --planners learned --modes glsr --init sampled {extra} "
-                            f"--seed-start 20000 --supervisor.home-retries {n}")
+                            f"--seed-start 20000 --supervisor.home-retries {n} {dev_runs.FOUR_SUITE_MODEL}")
     for prefix, suites, extra in (("", S4, "--episodes 2"), ("pert_", S3, f"--perturb {PERTURBS} --episodes 1"))
     for n in (0, 1))
 KEEP = ("task", "suite", "seed", "perturb", "success", "stopped_by", "homes", "empty_grasps", "perturbation_fired")

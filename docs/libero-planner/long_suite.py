@@ -19,18 +19,19 @@ OUT = HERE / "long_suite.json"
 SECTION = "libero-long-suite"
 ALL4 = f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20000"
 L10 = "tcot eval --suite libero_10 --planners learned --init sampled --episodes 4 --seed-start 20002"
+SHIPPED = dev_runs.FOUR_SUITE_MODEL  # the rows' "shipped (four suites)"
 SUITE_CK = "--checkpoint runs/libero/planner_libero10.safetensors"
 # run directory under runs/dev -> the command that wrote it (at the commit named in the row)
 COMMANDS = {
-    "home1": f"{ALL4} --modes glsr --supervisor.home-retries 1 (before the retreat)",
-    "l10_v2": f"{L10} --modes glsr (before the retreat)",
-    "l10_v2_sim": f"{L10} --modes glsr --stop-on simulator (before the retreat)",
+    "home1": f"{ALL4} --modes glsr --supervisor.home-retries 1 {SHIPPED} (before the retreat)",
+    "l10_v2": f"{L10} --modes glsr {SHIPPED} (before the retreat)",
+    "l10_v2_sim": f"{L10} --modes glsr --stop-on simulator {SHIPPED} (before the retreat)",
     "v3": f"{ALL4} --modes glsr,global --checkpoint runs/libero/planner_v3.safetensors (before the retreat)",
     "l10_v3": f"{L10} --modes glsr --checkpoint runs/libero/planner_v3.safetensors (before the retreat)",
-    "twin2": f"{ALL4} --modes global (before the retreat)",
-    "retreat": f"{ALL4} --modes glsr,global",
-    "l10_v2r": f"{L10} --modes glsr",
-    "l10_v2r_global": f"{L10} --modes global",
+    "twin2": f"{ALL4} --modes global {SHIPPED} (before the retreat)",
+    "retreat": f"{ALL4} --modes glsr,global {SHIPPED}",
+    "l10_v2r": f"{L10} --modes glsr {SHIPPED}",
+    "l10_v2r_global": f"{L10} --modes global {SHIPPED}",
     "l10_suite": f"tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20000 "
                  f"--modes glsr,global {SUITE_CK}",
 }

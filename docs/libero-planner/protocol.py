@@ -25,9 +25,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 EVAL = HERE / "eval-protocol"
 # One model per suite (the paper's TCoT row; the rows above are one model for all four, its TCoT-Multi): GLSR with
-# each suite's own shipped model, one folder for all of them (Makefile libero-protocol-suite)
+# each suite's own shipped model, one folder per suite (Makefile libero-protocol-suite)
 SUITE_EVAL = HERE / "eval-protocol-suite"
-SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; only libero_10 has one: `libero_panda_libero_10`)"
+SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; `libero_panda_<suite>`, where shipped)"
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
@@ -73,6 +73,25 @@ def _records(folder: Path = EVAL) -> list[dict]:
                                                      r["seed"]))
     (folder / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records
+
+
+def _suite_model_folders() -> list[Path]:
+    return sorted(p for p in SUITE_EVAL.glob("*") if p.is_dir()) if SUITE_EVAL.is_dir() else []
+
+
+def _suite_model_records() -> list[dict]:
+    """GLSR episodes of the suite-model row: each suite's folder holds that suite's tasks run with its own model
+    (one checkpoint per folder, as in :func:`_rows`)."""
+    out = []
+    for folder in _suite_model_folders():
+        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] == "glsr"]
+        strays = sorted({e["suite"] for e in eps} - {folder.name})
+        hashes = sorted({e["checkpoint_hash"] for e in eps})
+        if strays or len(hashes) > 1:
+            raise SystemExit(f"{folder}: holds episodes of suites {strays} or of {len(hashes)} checkpoints "
+                             f"({', '.join(map(str, hashes))}); one suite and its own model per folder")
+        out += eps
+    return out
 
 
 def _rows() -> dict[tuple[str, str], list[dict]]:
@@ -149,7 +168,7 @@ def table1_lines(by) -> list[str]:
             partial += f" (init states 0-{planned // 10 - 1} of each task)"
         lines.append(f"| ours: {label}{partial} | "
                      + " | ".join(rate(*got[s]) for s in SUITES) + f" | {_average(got)} |")
-    suite_eps = [e for e in _records(SUITE_EVAL) if e["perturb"] == "none" and e["mode"] == "glsr"]
+    suite_eps = _suite_model_records()
     if suite_eps:
         got = _suite_counts(suite_eps)
         lines.append(f"| ours: {SUITE_ROW} | " + " | ".join(rate(*got[s]) if got[s][1] else "-" for s in SUITES)
@@ -180,10 +199,11 @@ def table1_lines(by) -> list[str]:
                      + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
-    if suite_eps:
-        how = ", ".join(x for x in (f"{len(suite_eps)} episodes", _provenance("learned", "glsr", SUITE_EVAL)) if x)
-        lines.append(f"- {SUITE_ROW.split(' (')[0]} (`docs/libero-planner/eval-protocol-suite/`): {how}; "
-                     f"{sum(bool(e['fault']) for e in suite_eps)} faulted, none counted as a success.")
+    for folder in _suite_model_folders():
+        eps = [e for e in suite_eps if e["suite"] == folder.name]
+        how = ", ".join(x for x in (f"{len(eps)} episodes", _provenance("learned", "glsr", folder)) if x)
+        lines.append(f"- {SUITE_ROW.split(' (')[0]}, {folder.name} (`{folder.relative_to(ROOT)}/`): {how}; "
+                     f"{sum(bool(e['fault']) for e in eps)} faulted, none counted as a success.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
@@ -210,11 +230,12 @@ def table4_lines(by) -> list[str]:
     return lines
 
 
-def per_task_lines(by) -> list[str]:
+def per_task_lines(by, suite_eps: list[dict]) -> list[str]:
     """Successes of every row per task (k of n shipped init states), for eval-protocol/per_task.md: where a suite's
     figure is lost. A report of the test set, not a tuning signal (docs/seeds.md)."""
     oracle = [e for e in _read(ORACLE) if e["perturb"] == "none"]
-    cols = [(label.split(" (")[0], by[key]) for key, label in ROWS if by.get(key)] + [("oracle", oracle)]
+    cols = ([(label.split(" (")[0], by[key]) for key, label in ROWS if by.get(key)]
+            + [("GLSR, the suite's own model", suite_eps)] * bool(suite_eps) + [("oracle", oracle)])
     cells: dict = defaultdict(dict)
     for name, eps in cols:
         for e in eps:
@@ -233,7 +254,7 @@ def per_task_lines(by) -> list[str]:
 
 def main() -> None:
     by = _rows()
-    (EVAL / "per_task.md").write_text("\n".join(per_task_lines(by)) + "\n")
+    (EVAL / "per_task.md").write_text("\n".join(per_task_lines(by, _suite_model_records())) + "\n")
     text = "\n".join(table1_lines(by) + table4_lines(by)) + "\n"
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-protocol", text)

@@ -20,8 +20,8 @@ SECTION = "libero-window-choice"
 EVAL = f"tcot eval --suite {S4} --planners learned --init sampled --episodes 2 --seed-start 20000"
 # (run, mode, checkpoint, command); the shipped checkpoint's runs first: the baseline of each mode
 RUNS = (
-    ("twin2", "global", "shipped (51 points)", f"{EVAL} --modes global"),
-    ("home1", "glsr", "shipped (51 points)", f"{EVAL} --modes glsr --supervisor.home-retries 1"),
+    ("twin2", "global", "shipped (51 points)", f"{EVAL} --modes global {dev_runs.FOUR_SUITE_MODEL}"),
+    ("home1", "glsr", "shipped (51 points)", f"{EVAL} --modes glsr --supervisor.home-retries 1 {dev_runs.FOUR_SUITE_MODEL}"),
     ("v3", "global", "v3 (97 points)", f"{EVAL} --modes glsr,global --checkpoint runs/libero/planner_v3.safetensors"),
     ("v3", "glsr", "v3 (97 points)", f"{EVAL} --modes glsr,global --checkpoint runs/libero/planner_v3.safetensors"),
 )

@@ -56,9 +56,10 @@ def checkpoint_digest(cfg: RunConfig) -> str | None:
     planners without one, or when it cannot be resolved (the episode then records why)."""
     from tcot_hybrid.learning.checkpoint import meta_path
     from tcot_hybrid.planners import planner_checkpoint
+    from tcot_hybrid.tasks import make_task
 
     try:
-        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint)
+        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint, suite=make_task(cfg.task).suite)
     except TcotError:
         return None
     if path is None or not path.is_file():

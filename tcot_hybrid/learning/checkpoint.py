@@ -435,10 +435,17 @@ def checkpoints_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "checkpoints"
 
 
-def default_checkpoint(robot: str, kind: str = "trajectory", *, robot_ref: str | None = None) -> Path:
-    """The shipped checkpoint for ``robot`` (``<robot>_default`` / ``<robot>_direct_default``)."""
-    stem = f"{robot}_default" if kind == "trajectory" else f"{robot}_{kind}_default"
-    p = checkpoints_dir() / f"{stem}{SUFFIX}"
+def default_checkpoint(robot: str, kind: str = "trajectory", *, suite: str | None = None,
+                       robot_ref: str | None = None) -> Path:
+    """The shipped checkpoint for ``robot`` on a task of ``suite``: the suite's own model if one is shipped
+    (``<robot>_<suite>`` / ``<robot>_direct_<suite>``: the paper's TCoT row trains one model per LIBERO suite),
+    else the robot's model for all suites (``<robot>_default`` / ``<robot>_direct_default``, its TCoT-Multi row)."""
+    prefix = robot if kind == "trajectory" else f"{robot}_{kind}"
+    if suite:
+        own = checkpoints_dir() / f"{prefix}_{suite}{SUFFIX}"
+        if own.is_file():
+            return own
+    p = checkpoints_dir() / f"{prefix}_default{SUFFIX}"
     if not p.is_file():
         have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}")) if checkpoints_dir().is_dir() else []
         if robot == "libero_panda" and kind == "trajectory":  # LIBERO's own robot: its planner has its own pipeline

@@ -344,12 +344,9 @@ class LearnedPlanner(NetworkPlanner):
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
         from tcot_hybrid.learning.checkpoint import load_checkpoint
-        from tcot_hybrid.planners import planner_checkpoint
+        from tcot_hybrid.planners import context_checkpoint
 
-        from tcot_hybrid.robot import robot_ref
-
-        path = planner_checkpoint(cls.name, ctx.robot_name, ctx.options.get("checkpoint"),
-                                  robot_ref=robot_ref(ctx.robot) if ctx.robot is not None else None)
+        path = context_checkpoint(cls.name, ctx)
         ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot,
                              world=ctx.world_kind)
         return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))

@@ -85,3 +85,25 @@ def test_one_glsr_episode_with_the_tiny_planner(tiny_checkpoint):
         np.testing.assert_allclose(np.linalg.det(plan.tcp_rot), 1.0, atol=1e-6)
     assert any(e["kind"] == "supervisor" for e in result["events"])
     assert result["max_joint_limit_violation_rad"] < 0.05
+
+
+LONG_TASK = "libero_10:LIVING_ROOM_SCENE2_put_both_the_alphabet_soup_and_the_tomato_sauce_in_the_basket"
+
+
+@pytest.mark.parametrize("task, stem", [(LONG_TASK, "libero_panda_libero_10"), (SPATIAL_TASK, "libero_panda_default")])
+def test_learned_planner_loads_its_suites_own_shipped_model(task, stem):
+    """Without --checkpoint, a libero_10 task's learned planner is libero_10's own model (the paper's TCoT row),
+    a spatial task's the four-suite one; the resume key's checkpoint hash is that of the file loaded."""
+    from tcot_hybrid.evaluation.jobs import checkpoint_digest
+
+    cfg = RunConfig(task=task, seed=0, init="shipped", planner="learned")
+    runner = EpisodeRunner(cfg)
+    try:
+        loaded = runner.stack.planner.checkpoint_path
+    finally:
+        runner.stack.sim.close()
+    assert loaded.stem == stem
+    other = "libero_panda_default" if stem != "libero_panda_default" else "libero_panda_libero_10"
+    assert checkpoint_digest(cfg) != checkpoint_digest(dataclasses.replace(cfg, checkpoint=str(
+        loaded.with_name(other + loaded.suffix))))
+    assert checkpoint_digest(cfg) == checkpoint_digest(dataclasses.replace(cfg, checkpoint=str(loaded)))
