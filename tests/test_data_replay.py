@@ -9,7 +9,7 @@ import pytest
 
 from tcot_hybrid.data.collect import collect
 from tcot_hybrid.data.replay import LabelReplayPlanner, ReplayConfig, cmd_replay, markdown, replay_file
-from tcot_hybrid.errors import ConfigError, PlanningError
+from tcot_hybrid.errors import ConfigError, DatasetError, PlanningError
 from tcot_hybrid.planners.base import Observation
 from tcot_hybrid.run_config import RunConfig
 
@@ -102,7 +102,7 @@ def test_a_file_without_commanded_waypoints_is_named_and_the_cap_keeps_the_first
     with h5py.File(old, "a") as h5:
         for g in h5["data"].values():
             del g["obs/tcp_target_pos"]
-    with pytest.raises(ConfigError, match="has no obs/tcp_target_pos .*--global-path commanded needs it"):
+    with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*--global-path commanded"):
         cmd_replay(["--data", str(old), "--global-spacing", "events", "--global-path", "commanded", "--workers", "1"])
     with pytest.raises(ConfigError, match="--max-per-task must be >= 1, got 0"):
         cmd_replay(["--data", str(old), "--max-per-task", "0"])

@@ -163,7 +163,7 @@ def test_commanded_global_labels_come_from_the_recorded_waypoints(demo_file, tmp
     vocab = Vocabulary.build(instructions_of(demo_file))
     observed = TrajectoryWindowConfig(global_spacing="events")
     commanded = dataclasses.replace(observed, global_path="commanded")
-    with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*global_path 'commanded'"):
+    with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*windows.global_path 'commanded'"):
         load_frames(demo_file, "train", vocab, windows=commanded, max_tokens=24, direct_horizon=3)
     ahead = tmp_path / "ahead.hdf5"
     shutil.copy(demo_file, ahead)
@@ -293,15 +293,19 @@ def test_libero_configs_share_model_windows_and_height_reference():
     assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
 
 
-def test_libero_10_model_continues_the_97_point_model_on_its_suite_alone():
+@pytest.mark.parametrize("suite, stem", [("libero_10", "10"), ("libero_goal", "_goal")])
+def test_suite_models_continue_the_97_point_model_on_their_suite_alone(suite, stem):
     root = Path(__file__).resolve().parent.parent / "examples" / "configs"
-    v3, long_suite = (load_train_config(root / f"train_libero{x}.yaml") for x in ("_v3", "10"))
-    assert long_suite.suites == ("libero_10",) and v3.suites == ()
-    assert long_suite.init == v3.out and long_suite.out not in (v3.out, v3.init)
-    assert (long_suite.model, long_suite.windows, long_suite.height_ref, long_suite.data) == \
-        (v3.model, v3.windows, v3.height_ref, v3.data)
-    with pytest.raises(ConfigError, match="suites"):
-        TrainConfig(suites="libero_10")  # a bare string would be read as its letters
+    v3, own = (load_train_config(root / f"train_libero{x}.yaml") for x in ("_v3", stem))
+    assert own.suites == (suite,) and v3.suites == ()
+    assert own.init == v3.out and own.out not in (v3.out, v3.init)
+    assert (own.model, own.windows, own.height_ref, own.data) == (v3.model, v3.windows, v3.height_ref, v3.data)
+
+
+@pytest.mark.parametrize("name", ["suites", "extra_data", "online_data"])
+def test_a_bare_string_for_a_list_field_is_refused(name):
+    with pytest.raises(ConfigError, match=f"{name} must be a list.*write \\[x\\]"):
+        TrainConfig(**{name: "x"})  # would otherwise be read as its letters
 
 
 def test_cmd_train_missing_data_is_clear(tmp_path):

@@ -377,6 +377,15 @@ class DemoFile:
         self.info(name)  # names the file and the demo when there is no such demo
         return key in self._h5["data"][name]
 
+    def commanded_targets(self, name: str) -> np.ndarray:
+        """(T, 3) commanded waypoints of demo ``name`` [m, world] (``obs/tcp_target_pos``): what commanded-path
+        labels trace (``windows.global_path: commanded``, ``tcot replay --global-path commanded``)."""
+        if not self.has(name, TCP_TARGET):
+            raise DatasetError(f"{self.path}: {name} has no {TCP_TARGET} (collected before it was recorded), which "
+                               "commanded-path labels trace (windows.global_path 'commanded', --global-path "
+                               "commanded); recollect, or label the observed path")
+        return self.read(name, [TCP_TARGET])[TCP_TARGET]
+
     def image_valid(self, name: str) -> np.ndarray:
         """(T,) bool: which samples of one demo have a rendered planner image (all, unless collected with
         ``--image-every``)."""

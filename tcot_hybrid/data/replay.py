@@ -25,7 +25,6 @@ import numpy as np
 
 from tcot_hybrid.config import require_nonnegative
 from tcot_hybrid.data.dataset import open_demos
-from tcot_hybrid.data.dataset import TCP_TARGET
 from tcot_hybrid.data.labels import (GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POINTS, TRACK_KEYS, Track,
                                      TrajectoryWindowConfig, commanded_track, global_labels, track_from_arrays)
 from tcot_hybrid.errors import ConfigError, PlanningError
@@ -97,10 +96,7 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
         track = track_from_arrays(f.read(name, TRACK_KEYS))
         target = rot = None
         if config.windows.global_path == "commanded":
-            if not f.has(name, TCP_TARGET):
-                raise ConfigError(f"{path}: {name} has no {TCP_TARGET} (collected before it was recorded); "
-                                  "--global-path commanded needs it")
-            target = f.read(name, [TCP_TARGET])[TCP_TARGET]
+            target = f.commanded_targets(name)
         if config.orientation:
             from tcot_hybrid.learning.data import quat_wxyz_to_matrix
 

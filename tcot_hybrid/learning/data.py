@@ -24,7 +24,6 @@ import numpy as np
 import torch
 
 from tcot_hybrid.data import open_demos
-from tcot_hybrid.data.dataset import TCP_TARGET
 from tcot_hybrid.data.labels import (TrajectoryWindowConfig, commanded_track, global_labels, local_labels,
                                      track_from_arrays)
 from tcot_hybrid.errors import DatasetError
@@ -228,10 +227,7 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         track = track_from_arrays(arr)
         gtrack = track
         if windows.global_path == "commanded":
-            if not f.has(name, TCP_TARGET):
-                raise DatasetError(f"{f.path}: {name} has no {TCP_TARGET} (collected before it was recorded), "
-                                   "which windows.global_path 'commanded' labels from; recollect or use 'observed'")
-            gtrack = commanded_track(track, f.read(name, [TCP_TARGET])[TCP_TARGET], camera)
+            gtrack = commanded_track(track, f.commanded_targets(name), camera)
         gl, ll = global_labels(gtrack, windows), local_labels(track, windows)
         pos = arr["obs/robot0_eef_pos"].astype(np.float32)
         gpos = gtrack.xyz_m.astype(np.float32)

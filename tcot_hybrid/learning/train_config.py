@@ -178,9 +178,10 @@ class TrainConfig:
             require_int(name, getattr(self, name), minimum=1)
         require_int("threads", self.threads, minimum=0)
         require_int("detect_ignore_before_success", self.detect_ignore_before_success, minimum=0)
-        if isinstance(self.suites, str):
-            raise ConfigError(f"suites must be a list of suite names, got the string {self.suites!r} "
-                              f"(write [{self.suites}])")
+        for name, what in (("extra_data", "files"), ("online_data", "files"), ("suites", "suite names")):
+            value = getattr(self, name)
+            if isinstance(value, str):  # would otherwise be split into its letters
+                raise ConfigError(f"{name} must be a list of {what}, got the string {value!r} (write [{value}])")
         for name in ("extra_data", "online_data", "suites"):  # YAML gives a list
             object.__setattr__(self, name, tuple(str(p) for p in getattr(self, name)))
         if self.epoch_samples is not None:
