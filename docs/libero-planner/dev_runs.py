@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections import defaultdict
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -41,6 +42,49 @@ def won_lost(base: dict, eps: list[dict]) -> str:
     """"won / lost" of ``eps`` against ``base`` ((task, seed) -> success) on the layouts both ran."""
     paired = [(base[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in base]
     return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
+
+
+SUITE_KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "premature_stop")
+
+
+def gather_suite(runs: Iterable[tuple[str, str]], out: Path, suite: str) -> None:
+    """:func:`gather` of the unperturbed episodes of one suite, for :func:`model_table`."""
+    gather(runs, out, lambda name, e: ({"run": name, **{k: e.get(k) for k in SUITE_KEEP}}
+                                       if e["perturb"] == "none" and e["suite"] == suite else None))
+
+
+def model_table(rows: list[dict], table_rows, suite: str) -> list[str]:
+    """A suite's development-layout table: one line per (checkpoint, executor, mode, runs whose episodes of ``suite``
+    make the row), each mode's first row the baseline its won / lost counts against; then successes per task for
+    the rows that ran all six layouts 20000-20005. ``rows``: gathered episodes, each with its ``run``."""
+    out = [f"{suite} on sampled development layouts 20000-20005 (6 per task; a row that ran fewer says which; won / "
+           "lost against the first row of its mode on the layouts both ran):", "",
+           "| checkpoint | executor | mode | layouts | successes | won / lost |", "|---|---|---|---|---|---|"]
+    base: dict = {}
+    per_task: dict = defaultdict(dict)
+    for ck, how, mode, runs in table_rows:
+        eps = {(r["task"], r["seed"]): r for r in rows if r["run"] in runs and r["mode"] == mode and r["suite"] == suite}
+        if not eps:
+            continue
+        seeds = sorted({s for _, s in eps})
+        first = mode not in base
+        base.setdefault(mode, {k: e["success"] for k, e in eps.items()})
+        wl = "-" if first else won_lost(base[mode], list(eps.values()))
+        k = sum(e["success"] for e in eps.values())
+        out.append(f"| {ck} | {how} | {mode} | {seeds[0]}-{seeds[-1]} ({len(eps)}) | **{k}/{len(eps)}** | {wl} |")
+        if len(seeds) == 6:
+            name = f"{ck.split(' (')[0]}, {'retreat' if how.startswith('retreat') else 'no retreat'}, {mode}"
+            for (task, _), e in eps.items():
+                got = per_task[task].setdefault(name, [0, 0])
+                got[0] += bool(e["success"])
+                got[1] += 1
+    cols = list(dict.fromkeys(c for t in per_task.values() for c in t))
+    out += ["", "Per task (rows over all six layouts):", "", "| task | " + " | ".join(cols) + " |",
+            "|" + "---|" * (len(cols) + 1)]
+    for task in sorted(per_task):
+        out.append(f"| {task.split(':', 1)[1]} | " + " | ".join(
+            "%d/%d" % tuple(per_task[task][c]) if c in per_task[task] else "-" for c in cols) + " |")
+    return out
 
 
 def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) -> list[str]:

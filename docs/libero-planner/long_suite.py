@@ -9,7 +9,6 @@ the 97-point model, and libero_10's own model (examples/configs/train_libero10.y
 from __future__ import annotations
 
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
@@ -47,49 +46,15 @@ ROWS = (
     ("shipped (four suites, 51 points)", "retreat from a release", "global", ("retreat", "l10_v2r_global")),
     ("libero_10's own model (97 points)", "retreat from a release", "global", ("l10_suite",)),
 )
-KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "premature_stop")
 
 
 def gather() -> None:
-    dev_runs.gather(COMMANDS.items(), OUT, lambda name, e: (
-        {"run": name, **{k: e.get(k) for k in KEEP}} if e["perturb"] == "none" and e["suite"] == "libero_10"
-        else None))
-
-
-def _row_episodes(rows: list[dict], runs: tuple[str, ...], mode: str) -> dict:
-    return {(r["task"], r["seed"]): r for r in rows if r["run"] in runs and r["mode"] == mode}
+    dev_runs.gather_suite(COMMANDS.items(), OUT, "libero_10")
 
 
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    out = ["libero_10 on sampled development layouts 20000-20005 (6 per task; a row that ran only 20002-20005 says so; "
-           "won / lost against the first row of its mode on the layouts both ran):", "",
-           "| checkpoint | executor | mode | layouts | successes | won / lost |", "|---|---|---|---|---|---|"]
-    base: dict = {}
-    per_task: dict = defaultdict(dict)
-    for ck, how, mode, runs in ROWS:
-        eps = _row_episodes(rows, runs, mode)
-        if not eps:
-            continue
-        seeds = sorted({s for _, s in eps})
-        first = mode not in base
-        base.setdefault(mode, {k: e["success"] for k, e in eps.items()})
-        wl = "-" if first else dev_runs.won_lost(base[mode], list(eps.values()))
-        k = sum(e["success"] for e in eps.values())
-        out.append(f"| {ck} | {how} | {mode} | {seeds[0]}-{seeds[-1]} ({len(eps)}) | **{k}/{len(eps)}** | {wl} |")
-        if len(seeds) == 6:
-            name = f"{ck.split(' (')[0]}, {'retreat' if how.startswith('retreat') else 'no retreat'}, {mode}"
-            for (task, _), e in eps.items():
-                got = per_task[task].setdefault(name, [0, 0])
-                got[0] += bool(e["success"])
-                got[1] += 1
-    cols = list(dict.fromkeys(c for t in per_task.values() for c in t))
-    out += ["", "Per task (rows over all six layouts):", "", "| task | " + " | ".join(cols) + " |",
-            "|" + "---|" * (len(cols) + 1)]
-    for task in sorted(per_task):
-        out.append(f"| {task.split(':', 1)[1]} | " + " | ".join(
-            "%d/%d" % tuple(per_task[task][c]) if c in per_task[task] else "-" for c in cols) + " |")
-    return out + dev_runs.command_lines("long_suite.py", 2, COMMANDS.items())
+    return dev_runs.model_table(rows, ROWS, "libero_10") + dev_runs.command_lines("long_suite.py", 2, COMMANDS.items())
 
 
 if __name__ == "__main__":
