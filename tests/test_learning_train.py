@@ -293,13 +293,15 @@ def test_libero_configs_share_model_windows_and_height_reference():
     assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
 
 
-@pytest.mark.parametrize("suite, stem", [("libero_10", "10"), ("libero_goal", "_goal")])
-def test_suite_models_continue_the_97_point_model_on_their_suite_alone(suite, stem):
+@pytest.mark.parametrize("suite, stem, base", [("libero_10", "10", "_v3"), ("libero_goal", "_goal97", "_v3"),
+                                                ("libero_goal", "_goal", "_v2")])
+def test_suite_models_continue_a_four_suite_model_on_their_suite_alone(suite, stem, base):
     root = Path(__file__).resolve().parent.parent / "examples" / "configs"
-    v3, own = (load_train_config(root / f"train_libero{x}.yaml") for x in ("_v3", stem))
-    assert own.suites == (suite,) and v3.suites == ()
-    assert own.init == v3.out and own.out not in (v3.out, v3.init)
-    assert (own.model, own.windows, own.height_ref, own.data) == (v3.model, v3.windows, v3.height_ref, v3.data)
+    four, own, v3 = (load_train_config(root / f"train_libero{x}.yaml") for x in (base, stem, "_v3"))
+    assert own.suites == (suite,) and four.suites == ()
+    assert own.init == four.out and own.out not in (four.out, four.init)
+    assert (own.model, own.windows, own.height_ref) == (four.model, four.windows, four.height_ref)
+    assert own.data == v3.data  # the demonstrations collected through the release
 
 
 @pytest.mark.parametrize("name", ["suites", "extra_data", "online_data"])

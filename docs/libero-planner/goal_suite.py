@@ -1,6 +1,7 @@
 """The goal suite (libero_goal) on sampled development layouts 20000-20005 (6 per task; docs/seeds.md: never the
 shipped init states, never 90000+): the four-suite model with and without the retreat from a release, the 97-point
-model, and libero_goal's own model (examples/configs/train_libero_goal.yaml), for docs/libero-planner.md, "The goal
+model, and libero_goal's own model started from either (examples/configs/train_libero_goal97.yaml,
+train_libero_goal.yaml), for docs/libero-planner.md, "The goal
 suite's own model":
 
     .venv/bin/python docs/libero-planner/goal_suite.py --gather   # runs/dev/* -> goal_suite.json
@@ -24,17 +25,21 @@ COMMANDS = {
     "goal_r": f"{GOAL} --episodes 4 --seed-start 20002 --modes glsr {dev_runs.FOUR_SUITE_MODEL}",
     "goal_nor": f"{GOAL} --episodes 4 --seed-start 20002 --modes glsr --executor.release-retreat-m None "
                 f"{dev_runs.FOUR_SUITE_MODEL}",
-    "goal_suite": f"{GOAL} --episodes 6 --seed-start 20000 --modes glsr,global "
-                  "--checkpoint runs/libero/planner_libero_goal.safetensors",
+    "goal_suite97": f"{GOAL} --episodes 6 --seed-start 20000 --modes glsr,global "
+                    "--checkpoint runs/libero/planner_libero_goal97.safetensors",
+    "goal_suite51": f"{GOAL} --episodes 6 --seed-start 20000 --modes glsr,global "
+                    "--checkpoint runs/libero/planner_libero_goal.safetensors",
 }
 # (checkpoint, executor, mode, runs whose libero_goal episodes make the row); each mode's first row is the baseline
 ROWS = (
     ("shipped (four suites, 51 points)", "retreat from a release", "glsr", ("retreat", "goal_r")),
     ("shipped (four suites, 51 points)", "before the retreat", "glsr", ("home1", "goal_nor")),
     ("v3 (four suites, 97 points)", "before the retreat", "glsr", ("v3",)),
-    ("libero_goal's own model (97 points)", "retreat from a release", "glsr", ("goal_suite",)),
+    ("libero_goal's own model, from v3 (97 points)", "retreat from a release", "glsr", ("goal_suite97",)),
+    ("libero_goal's own model, from the shipped (51 points)", "retreat from a release", "glsr", ("goal_suite51",)),
     ("shipped (four suites, 51 points)", "retreat from a release", "global", ("retreat",)),
-    ("libero_goal's own model (97 points)", "retreat from a release", "global", ("goal_suite",)),
+    ("libero_goal's own model, from v3 (97 points)", "retreat from a release", "global", ("goal_suite97",)),
+    ("libero_goal's own model, from the shipped (51 points)", "retreat from a release", "global", ("goal_suite51",)),
 )
 
 
