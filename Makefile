@@ -95,6 +95,10 @@ planner: setup
 # 40 tasks; sampled layouts on the reporting seeds (docs/seeds.md); every controller and both IK backends on
 # libero_spatial and libero_10 (10 init states per task).
 LIBERO_SUITES := libero_spatial,libero_object,libero_goal,libero_10
+# The one model for all four suites (the paper's TCoT-Multi row), named: without --checkpoint a suite that ships its
+# own model (tcot_hybrid/checkpoints/libero_panda_<suite>.*) loads that one
+MULTI_MODEL := --checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors
+SUITE_MODEL_FILES = $(filter-out %default.safetensors %direct_%,$(wildcard tcot_hybrid/checkpoints/libero_panda_*.safetensors))
 libero-oracle-eval: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init shipped --episodes 50 --seed-start 0 \
 		--workers 2 --out docs/eval-libero/oracle-shipped
@@ -114,7 +118,7 @@ libero-oracle-eval: setup
 #  * 10: the shipped 400-demo checkpoint's recipe, two runs (train_libero.yaml, then train_libero_finetune.yaml from
 #    its weights: the first alone was underfit).
 # The last run's checkpoint is copied to tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks
-# on LIBERO tasks; held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
+# on LIBERO tasks of suites without their own model (libero_panda_<suite>.*: libero_10's, built after it); held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
 # on the same file (train_libero_direct.yaml, ~15 min) and copied to libero_panda_direct_default.*, which
 # `--planner direct` picks on LIBERO tasks.
 LIBERO_PLANNER_EPISODES ?= 50
@@ -149,6 +153,8 @@ ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	cp runs/libero/planner_ft.metrics.jsonl docs/libero-planner/train_finetune.metrics.jsonl
 	cp runs/libero/planner_ft.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner_ft.json tcot_hybrid/checkpoints/libero_panda_default.json
+	# this recipe builds no suite model: one left from another build would load ahead of the new default
+	rm -f $(SUITE_MODEL_FILES) $(SUITE_MODEL_FILES:.safetensors=.json)
 else
 	$(call libero_train_resumable,train_libero50,planner50,train50,)
 	# from nothing the collection already runs each demo through its release: the fine-tune reads that file
@@ -179,7 +185,7 @@ endif
 # beside it (an episode's key holds its checkpoint's hash: a rerun there evaluates the shipped one and mixes them)
 libero-planner-eval: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --init shipped --episodes 2 \
-		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped-v2
+		--seed-start 0 --workers 2 --out docs/libero-planner/eval-shipped-v2 $(MULTI_MODEL)
 	$(BIN)/python docs/libero-planner/summarize.py
 	$(BIN)/tcot eval --suite libero_object --planners direct --init sampled --episodes 3 --seed-start 20000 \
 		--workers 2 --out docs/libero-planner/eval-direct
@@ -189,7 +195,7 @@ libero-planner-eval: setup
 LIBERO_PERTURBS := object_moved,target_moved,object_drop,offcenter_grasp,arm_push,camera_noise,camera_shift,init_posture
 libero-planner-perturb: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --perturb $(LIBERO_PERTURBS) \
-		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb-v3
+		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb-v3 $(MULTI_MODEL)
 	$(BIN)/python docs/libero-planner/summarize.py
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
@@ -205,9 +211,7 @@ define libero_protocol_row
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
 	cp $(or $(4),$(PROTOCOL))/eval.json $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).json
 endef
-# The learned rows are the paper's TCoT-Multi row: the one model for all four suites, named (a suite that ships its
-# own model would otherwise load that one)
-MULTI_MODEL := --checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors
+# The learned rows are the paper's TCoT-Multi row (MULTI_MODEL, above)
 libero-protocol: setup
 	$(call libero_protocol_row,learned,glsr,50,,,$(MULTI_MODEL))
 	$(call libero_protocol_row,learned,global,50,,,$(MULTI_MODEL))
@@ -220,8 +224,7 @@ libero-protocol: setup
 # (tcot_hybrid/checkpoints/libero_panda_<suite>.safetensors, which that suite's tasks load by default), one folder
 # per suite under $(PROTOCOL_SUITE)
 PROTOCOL_SUITE := docs/libero-planner/eval-protocol-suite
-SUITE_MODELS := $(patsubst tcot_hybrid/checkpoints/libero_panda_%.safetensors,%,\
-	$(filter-out %default.safetensors,$(wildcard tcot_hybrid/checkpoints/libero_panda_*.safetensors)))
+SUITE_MODELS := $(patsubst tcot_hybrid/checkpoints/libero_panda_%.safetensors,%,$(SUITE_MODEL_FILES))
 define suite_protocol_row
 $(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_SUITE)/$(1),$(1),\
 	--checkpoint tcot_hybrid/checkpoints/libero_panda_$(1).safetensors)

@@ -344,25 +344,33 @@ def test_a_suite_with_its_own_shipped_model_gets_it_and_the_others_the_default(t
     assert planner_checkpoint("oracle", "libero_panda", None, suite="libero_10") is None
 
 
+def suite_models() -> list:
+    """The shipped LIBERO suite models (``libero_panda_<suite>``; not the defaults, not a direct planner's)."""
+    from tcot_hybrid.learning.checkpoint import checkpoints_dir
+
+    return sorted(p for p in checkpoints_dir().glob("libero_panda_*.safetensors")
+                  if not p.stem.endswith("default") and "_direct_" not in p.stem)
+
+
 def test_every_shipped_suite_model_was_trained_on_that_suite_alone():
     """A shipped ``libero_panda_<suite>`` is what tasks of <suite> load by default: its training config must name
     that suite and no other (the file name is the only link between the two)."""
-    from tcot_hybrid.learning.checkpoint import checkpoints_dir
-
-    own = [p for p in checkpoints_dir().glob("libero_panda_*.safetensors")
-           if not p.stem.endswith("default")]
+    own = suite_models()
     assert own, "no suite model is shipped"
     for p in own:
         suite = p.stem.removeprefix("libero_panda_")
         assert json.loads(meta_path(p).read_text())["train_config"]["suites"] == [suite], p.name
 
 
-def test_shipped_libero_checkpoint_is_small_and_made_for_libero():
-    """`--planner learned` on a LIBERO task loads the libero_panda default: a LIBERO checkpoint (world, per-scene
-    camera, heights from the camera, a rotation head) for the bundled libero_panda's model, under 10 MB."""
+@pytest.mark.parametrize("suite", [None, *(p.stem.removeprefix("libero_panda_") for p in suite_models())])
+def test_shipped_libero_checkpoint_is_small_and_made_for_libero(suite):
+    """`--planner learned` on a LIBERO task loads its suite's model or the libero_panda default: each a LIBERO
+    checkpoint (world, per-scene camera, heights from the camera, a rotation head) for the bundled libero_panda's
+    model, under 10 MB."""
     from tcot_hybrid.robot import load_robot_spec
 
-    path = default_checkpoint("libero_panda")
+    path = default_checkpoint("libero_panda", suite=suite)
+    assert path.stem == (f"libero_panda_{suite}" if suite else "libero_panda_default")
     assert path.stat().st_size < 10e6
     ck = load_checkpoint(path, robot_spec=load_robot_spec("libero_panda"), kind="trajectory", world="libero")
     assert ck.meta["camera"]["per_scene"] and ck.meta["height_ref"] == "camera" and ck.model.cfg.rot_head

@@ -32,7 +32,7 @@ RUNS = (
     ("v2p6_global", "runs/libero/planner_v2p6", "6 points per piece; demos through the release (both parts)",
      f"{EVAL} --checkpoint runs/libero/planner_v2p6.safetensors"),
     ("sidehand_global", "runs/libero/planner_v2p6", "the same, hands without a yaw kept continuous along the plan "
-     "(docs/libero-planner.md, \"Side grasps and the wrist\")", f"{EVAL} (the shipped checkpoint)"),
+     "(docs/libero-planner.md, \"Side grasps and the wrist\")", f"{EVAL} {dev_runs.FOUR_SUITE_MODEL} (the shipped checkpoint)"),
 )
 KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "steps")
 
