@@ -1,8 +1,7 @@
 """The goal suite (libero_goal) on sampled development layouts 20000-20005 (6 per task; docs/seeds.md: never the
 shipped init states, never 90000+): the four-suite model with and without the retreat from a release, the 97-point
 model, and libero_goal's own model started from either (examples/configs/train_libero_goal97.yaml,
-train_libero_goal.yaml), for docs/libero-planner.md, "The goal
-suite's own model":
+train_libero_goal.yaml), for docs/libero-planner.md, "The goal suite's own model":
 
     .venv/bin/python docs/libero-planner/goal_suite.py --gather   # runs/dev/* -> goal_suite.json
     .venv/bin/python docs/libero-planner/goal_suite.py            # goal_suite.json -> docs/libero-planner.md
