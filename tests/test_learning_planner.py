@@ -25,6 +25,7 @@ from tcot_hybrid.planners.learned import (  # noqa: E402
     align_switches_to_dwells,
     canonical_hand,
     check_outputs,
+    deepen_side_grasps,
     height_plan,
     lowest_plan_height,
 )
@@ -380,6 +381,47 @@ def test_learned_planner_config_validated():
         LearnedPlannerConfig(dwell_step_m=-0.01)
     with pytest.raises(ConfigError, match="min_height_m"):
         LearnedPlannerConfig(min_height_m=float("nan"))
+    with pytest.raises(ConfigError, match="side_grasp_depth_m"):
+        LearnedPlannerConfig(side_grasp_depth_m=-0.01)
+
+
+def _hand(approach) -> np.ndarray:
+    """A TCP orientation whose approach axis (z) is ``approach``."""
+    z = np.asarray(approach, float) / np.linalg.norm(approach)
+    x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.c_[x, np.cross(z, x), z]
+
+
+def test_side_grasps_go_deeper_along_their_approach_and_nothing_else_moves():
+    pts = np.array([[0.0, -0.20, 1.0], [0.0, -0.14, 1.0], [0.0, -0.02, 1.0], [0.0, -0.02, 1.1],
+                    [0.1, 0.0, 0.95], [0.1, 0.0, 1.1]])
+    closed = np.array([0, 1, 1, 0, 1, 1], bool)  # a handle grasped sideways and pulled; a top-down pick
+    side, down = _hand([0.0, -1.0, 0.05]), _hand([0.0, 0.0, -1.0])
+    rot = np.stack([side, side, side, side, down, down])
+    out = deepen_side_grasps(pts, closed, rot, 0.01)
+    moved = np.linalg.norm(out - pts, axis=1)
+    assert np.isclose(moved[1], 0.01) and np.allclose(np.delete(moved, 1), 0.0)
+    assert np.isclose((out[1] - pts[1]) @ side[:, 2], 0.01)  # along the approach, into the handle
+    assert np.array_equal(deepen_side_grasps(pts, np.ones(6, bool), rot, 0.01), pts)  # already holding: no grasp
+    tilted = np.stack([_hand([0.0, -1.0, -0.7])] * 6)  # 35 degrees down: a rim grasp, not a side grasp
+    assert np.array_equal(deepen_side_grasps(pts, closed, tilted, 0.01), pts)
+
+
+def test_side_grasp_depth_reaches_the_plan_and_off_leaves_it(camera):
+    pts = np.array([[0.5, -0.20, 0.12], [0.5, -0.14, 0.12], [0.5, -0.02, 0.12]])  # in the workcell camera's view
+    g = np.array([0, 1, 1], bool)
+    rot = np.stack([_hand([0.0, -1.0, 0.0])] * 3)
+    uv, _ = camera.project(pts)
+
+    def lifted(depth_m):
+        cfg = LearnedPlannerConfig(side_grasp_depth_m=depth_m)
+        p = height_plan(camera, uv, pts[:, 2], g, kind="local", step=0, config=cfg, global_spacing="time",
+                        tcp_rot=rot)
+        return camera.unproject(p.uv_px, p.depth_m)
+
+    assert np.allclose(lifted(0.0), pts, atol=1e-9)
+    assert np.allclose(lifted(0.012) - pts, [[0, 0, 0], [0, -0.012, 0], [0, 0, 0]], atol=1e-9)
 
 
 def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_path, camera, monkeypatch):
@@ -396,7 +438,9 @@ def test_rotation_head_and_camera_heights_become_world_tcp_rot_and_world_z(tmp_p
             "windows": {"L_g": 51, "n_g": 4, "L_l": 8, "n_l": 2}, "data_hash": "t", "metrics": {},
             "versions": versions(), "max_unknown_fraction": 0.5, "direct_horizon": 3}
     path = save_checkpoint(tmp_path / "lib.safetensors", model, meta)
-    p = LearnedPlanner(load_checkpoint(path, camera=camera, world="libero"), camera)
+    # random hands include side grasps, which go deeper along their approach by default: off, heights stay exact
+    p = LearnedPlanner(load_checkpoint(path, camera=camera, world="libero"), camera,
+                       config=LearnedPlannerConfig(side_grasp_depth_m=0.0))
     R_cam = Rotation.random(60, random_state=1).as_matrix()
     cam_z = float(camera.T_world_cam[2, 3])
     real = p.model.forward

@@ -33,6 +33,7 @@ from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.planners.base import MODES, Observation, Planner
 
 BLANK_STD = 1.0  # an image whose pixel values vary less than this (0-255 scale) shows nothing
+SIDE_GRASP_MAX_ELEVATION_DEG = 30.0  # approach axes this close to horizontal are side grasps (handles, bars)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,6 +65,14 @@ class LearnedPlannerConfig:
                       (``lowest_tcp_by_camera``, 1-3 cm above the table top: grasps; :func:`lowest_plan_height`).
                       Demonstrated grasps are at 1-2 cm; late in failed episodes the local prompt was seen to answer
                       -0.5 m. Up: refuses more plans with low points; down: lets the arm try to push into the table.
+    side_grasp_depth_m: a grasp (a waypoint where the gripper closes) made with the hand approaching sideways
+                      (approach axis, TCP z, within ``SIDE_GRASP_MAX_ELEVATION_DEG`` of horizontal) is moved this far
+                      further along the approach [m]. A pixel of the 128 px planner image is ~6 mm across the
+                      table; a drawer handle pinched 6 mm short held it by the fingertips, which slid off
+                      half-way through the pull. 12 mm by measurement on development layouts
+                      (docs/libero-planner.md, "How deep a side grasp goes"). Needs the rotation head (LIBERO
+                      checkpoints; workcell plans are top-down); 0 = off. Up: firmer hold on handles, the fingers
+                      nearer what stands behind the handle.
     """
 
     switch_window: int = 2
@@ -71,6 +80,7 @@ class LearnedPlannerConfig:
     dwell_leave_m: float | None = 0.03
     dwell_step_m: float = 0.01
     min_height_m: float = -0.02
+    side_grasp_depth_m: float = 0.012
 
     def __post_init__(self) -> None:
         from tcot_hybrid.config import require_finite, require_int, require_nonnegative, require_positive
@@ -81,6 +91,7 @@ class LearnedPlannerConfig:
             require_positive("learned.dwell_leave_m (or null: off)", self.dwell_leave_m)
         require_positive("learned.dwell_step_m", self.dwell_step_m)
         require_finite("learned.min_height_m", self.min_height_m)
+        require_nonnegative("learned.side_grasp_depth_m", self.side_grasp_depth_m)
 
 
 def _move_switches(closed: np.ndarray, window: int, choose) -> np.ndarray:
@@ -152,8 +163,26 @@ def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed:
     if kind == "global" and time_spaced and config.dwell_leave_m is not None:
         closed = align_switches_to_dwells(camera.unproject(uv_px, depth), closed, window=config.switch_window,
                                           leave_m=config.dwell_leave_m, dwell_m=config.dwell_step_m)
+    if config.side_grasp_depth_m > 0 and tcp_rot is not None:
+        points = deepen_side_grasps(camera.unproject(uv_px, depth), closed, tcp_rot, config.side_grasp_depth_m)
+        uv_px, depth = camera.project(points)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
                         step=step, tcp_rot=tcp_rot, meta=meta or {})
+
+
+def deepen_side_grasps(points: np.ndarray, closed: np.ndarray, tcp_rot: np.ndarray, depth_m: float) -> np.ndarray:
+    """Waypoints (N, 3) with every grasp (a waypoint where the gripper bit turns closed; a plan that starts
+    closed is already holding) whose approach axis (``tcp_rot[i][:, 2]``) lies within
+    ``SIDE_GRASP_MAX_ELEVATION_DEG`` of horizontal moved ``depth_m`` along that axis. Pure function."""
+    out = np.array(points, float)
+    c = np.asarray(closed, bool)
+    max_sin = np.sin(np.radians(SIDE_GRASP_MAX_ELEVATION_DEG))
+    for i in np.flatnonzero(c[1:] & ~c[:-1]) + 1:
+        approach = np.asarray(tcp_rot[i], float)[:, 2]
+        approach = approach / np.linalg.norm(approach)
+        if abs(approach[2]) < max_sin:
+            out[i] += depth_m * approach
+    return out
 
 
 def check_image(image, camera: CameraModel) -> np.ndarray:
