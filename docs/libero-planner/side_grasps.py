@@ -28,6 +28,9 @@ RUNS = {
                                f"--learned.side-grasp-depth-m {d} {dev_runs.FOUR_SUITE_MODEL}") for d in DEPTHS},
     **{f"side_other_{d}": (d, f"{EVAL} --tasks {OTHER} --episodes 10 --seed-start 20000 "
                               f"--learned.side-grasp-depth-m {d}") for d in ("0", "0.012")},
+    **{f"side_{short}_{d}": (d, f"{EVAL} --suite {suite} --episodes 5 --seed-start 20000 "
+                                 f"--learned.side-grasp-depth-m {d}")
+       for short, suite in (("obj", "libero_object"), ("spa", "libero_spatial")) for d in ("0", "0.012")},
     **{f"side_mid_{d}": (d, f"{EVAL} --tasks libero_goal:open_the_middle_drawer_of_the_cabinet --episodes 10 "
                             f"--seed-start 20010 --learned.side-grasp-depth-m {d}") for d in ("0", "0.012")},
 }
