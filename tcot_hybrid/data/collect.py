@@ -19,7 +19,6 @@ import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
-import multiprocessing as mp  # noqa: E402
 import shutil  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
@@ -33,6 +32,7 @@ from tcot_hybrid.data.dataset import (  # noqa: E402
 )
 from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
+from tcot_hybrid.workers import worker_pool  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
 # ... and on LIBERO, before those, the plan is carried out (at most this many planner steps): LIBERO judges several
@@ -384,12 +384,11 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
         todo = [key for key in pairs if key not in done]
         cfgs = [dataclasses.replace(base_cfg, task=t, seed=s, perturb=dataclasses.replace(base_cfg.perturb, name=p))
                 for (t, s, p) in todo]
-        pool = None
-        try:
+        with contextlib.ExitStack() as stack:
             if workers == 1 or len(cfgs) <= 1:
                 results = map(_worker, [(c, image_every) for c in cfgs])
             else:
-                pool = mp.get_context("spawn").Pool(min(workers, len(cfgs)), maxtasksperchild=40)
+                pool = stack.enter_context(worker_pool(min(workers, len(cfgs)), maxtasksperchild=40))
                 results = pool.imap_unordered(_worker, [(c, image_every) for c in cfgs],
                                               chunksize=block * len(perturbs) if block > 1 else 1)
             with tqdm(total=len(pairs), initial=len(pairs) - len(todo), desc=f"collect {path.name}", unit="demo",
@@ -411,10 +410,6 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                         failed += not payload.attrs["success"]
                         samples += payload.attrs["num_samples"]
                     bar.update(1)
-        finally:
-            if pool is not None:
-                pool.terminate()
-                pool.join()
         present = len(done)
     finally:
         if write_failed:  # don't write more into a file whose last write failed; just close it

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import multiprocessing as mp
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,6 +29,7 @@ from tcot_hybrid.data.labels import (GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POIN
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation, Planner
 from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
+from tcot_hybrid.workers import worker_pool
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -141,7 +141,7 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
     rows: list[dict] = []
     with tqdm(total=len(jobs), desc="replay", unit="demo", disable=not progress) as bar:
         if workers > 1:
-            with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+            with worker_pool(min(workers, len(jobs))) as pool:
                 for r in pool.imap_unordered(_job, jobs):
                     rows.append(r)
                     bar.update()

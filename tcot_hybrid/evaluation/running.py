@@ -2,9 +2,9 @@
 from ``DIR/episodes.jsonl``."""
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
-import multiprocessing as mp
 import os
 import time
 from pathlib import Path
@@ -14,17 +14,14 @@ from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
 from tcot_hybrid.evaluation.aggregation import aggregate, detector_metrics
 from tcot_hybrid.evaluation.jobs import Job
 from tcot_hybrid.evaluation.reports import markdown
+from tcot_hybrid.workers import worker_pool
 
 DETECTOR_STEPS_AFTER_SUCCESS = 5  # planner steps past success on which the detector is probed
 
 
 def run_job(job: Job) -> dict:
     """Run one episode in this process; never raises (a crash is a failed, faulted episode)."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    # One compute thread per worker: W workers on W cores; torch's default (all cores per process)
-    # oversubscribes and made batch-1 inference ~40x slower in measurements here.
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("MKL_NUM_THREADS", "1")
+    os.environ.setdefault("MUJOCO_GL", "egl")  # compute threads: set before the worker started (worker_pool)
     from tcot_hybrid.episode import EpisodeRunner
 
     c = job.cfg
@@ -94,24 +91,22 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
     jobs = [dataclasses.replace(j, fixed_key=j.key) for j in jobs]  # hashed once, here: workers reuse it
     todo = longest_first([j for j in jobs if j.key not in done])
     t0 = time.perf_counter()
-    pool = None
-    with open(log, "a") as f, tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="eval", unit="ep",
-                                    disable=not progress) as bar:
+    with contextlib.ExitStack() as stack:
+        f = stack.enter_context(open(log, "a"))
+        bar = stack.enter_context(tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="eval", unit="ep",
+                                       disable=not progress))
         if ray_address:
             results = _ray_results(todo, ray_address)
         elif workers <= 1:
             results = map(run_job, todo)
         else:
-            pool = mp.get_context("spawn").Pool(workers, maxtasksperchild=50)
+            pool = stack.enter_context(worker_pool(workers, maxtasksperchild=50))
             results = pool.imap_unordered(run_job, todo, chunksize=1)
         for rec in results:
             f.write(json.dumps(rec) + "\n")
             f.flush()
             done[rec["key"]] = rec
             bar.update(1)
-        if pool is not None:
-            pool.close()
-            pool.join()
     wall = time.perf_counter() - t0
     records = [done[j.key] for j in jobs]
     for r in records:
