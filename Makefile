@@ -200,13 +200,15 @@ libero-planner-perturb: setup
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
 # tcot eval per row into one folder (resumable); each run's eval.json is kept as eval-<planner>-<mode>.json (its wall
-# time) and the commit it ran at as eval-<planner>-<mode>.commit. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
+# time) and the commit it ran at as eval-<planner>-<mode>.commit; a row cut off with the session resumes on another
+# machine from progress.jsonl.gz (`protocol.py --save-progress`, committed) when its commit is the same. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
 # $(1) planner, $(2) mode, $(3) episodes per task; optional $(4) folder (default $(PROTOCOL)), $(5) suites (default
 # the four), $(6) further tcot eval flags
 define libero_protocol_row
 	mkdir -p $(or $(4),$(PROTOCOL))
 	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).commit
+	$(BIN)/python docs/libero-planner/protocol.py --restore-progress $(or $(4),$(PROTOCOL))
 	$(BIN)/tcot eval --suite $(or $(5),$(LIBERO_SUITES)) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
 	cp $(or $(4),$(PROTOCOL))/eval.json $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).json

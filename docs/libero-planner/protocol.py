@@ -9,9 +9,21 @@ eval-<planner>-<mode>.commit; the episodes, trimmed, as records.jsonl), then
 
 A row with fewer than 500 episodes in a suite is printed as it stands, with how many it has. The paper reports
 ± one standard error; the intervals here are Wilson 95 % intervals (wider).
+
+A row takes hours (GLSR on libero_10 alone about two) and a session can end mid-row, on a machine that is then gone:
+
+    .venv/bin/python docs/libero-planner/protocol.py --save-progress [FOLDER]     # episodes.jsonl -> progress.jsonl.gz
+    .venv/bin/python docs/libero-planner/protocol.py --restore-progress [FOLDER]  # and back, before tcot eval resumes
+
+(``make libero-protocol`` restores before every row). The saved episodes keep every field but, of their events, only
+the detector's calls (what the detector figures read), so a resumed row's eval.json is the same as an unbroken one's.
+A row is merged into records.jsonl (and so into the tables) only once episodes.jsonl holds all of it: a rerun at a
+new commit replaces the old row whole, never init state by init state.
 """
 from __future__ import annotations
 
+import argparse
+import gzip
 import json
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -59,20 +71,102 @@ def _read(path: Path) -> list[dict]:
 def _records(folder: Path = EVAL) -> list[dict]:
     """The episodes, trimmed to the fields these tables use. ``tcot eval``'s episodes.jsonl (every event of every
     episode, 50 MB a row, kept out of git: it is what a resumed run reads) is merged into records.jsonl (committed):
-    an episode in both is taken from episodes.jsonl, and rows only records.jsonl holds (a row run on another machine
-    or before a fresh checkout) are kept."""
+    a row episodes.jsonl holds whole (:func:`_complete_rows`) replaces that row's episodes, and rows only
+    records.jsonl holds (a row run on another machine or before a fresh checkout) are kept."""
     def key(r: dict) -> tuple:
         return r["task"], r["planner"], r["mode"], r["perturb"], r["seed"]
 
     merged = {key(r): r for r in _read(folder / "records.jsonl")}
-    full = _read(folder / "episodes.jsonl")
+    full = _complete_rows(_read(folder / "episodes.jsonl"), folder)
     if not full:
         return list(merged.values())
     merged.update({key(r): r for r in ({k: e.get(k) for k in RECORD_FIELDS} for e in full)})
+    _drop_saved_progress(folder, {_run_row(e) for e in full})
     records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
                                                      r["seed"]))
     (folder / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return records
+
+
+def _run_row(e: dict) -> tuple[str, str, str]:
+    """The run an episode belongs to: (planner, mode, perturbation)."""
+    return e["planner"], e["mode"], e["perturb"]
+
+
+def _row_size(row: tuple[str, str], suites: set[str]) -> int:
+    return len(suites) * PLANNED_PER_SUITE.get(row, PER_SUITE)
+
+
+def _complete_rows(episodes: list[dict], folder: Path) -> list[dict]:
+    """The episodes of the rows episodes.jsonl holds whole (every planned init state of every suite the row covers:
+    the four here, a suite-model folder its one suite); a row still running is named and left out, so the tables
+    keep its last complete run instead of mixing two runs' configurations."""
+    by: dict = defaultdict(dict)
+    for e in episodes:
+        by[_run_row(e)][(e["task"], e["seed"])] = e  # later lines win
+    suites = {folder.name} if folder.parent == SUITE_EVAL else set(SUITES)
+    out = []
+    for (planner, mode, perturb), eps in sorted(by.items()):
+        want = _row_size((planner, mode), suites)
+        if len(eps) >= want:
+            out += eps.values()
+        else:
+            print(f"{folder.name}: the {planner} {mode} row is in progress in episodes.jsonl ({len(eps)} of {want} "
+                  "episodes): not merged until it is complete")
+    return out
+
+
+def _slim(episode: dict) -> dict:
+    """An episode with, of its events, only the detector's calls (the fields detector_metrics reads)."""
+    keep = ("kind", "step", "p_success", "true_success")
+    return {**episode, "events": [{k: ev[k] for k in keep if k in ev} for ev in episode.get("events", [])
+                                  if "p_success" in ev]}
+
+
+def save_progress(folder: Path) -> Path:
+    """episodes.jsonl (what a resumed ``tcot eval`` reads) as progress.jsonl.gz, slimmed (:func:`_slim`), to commit."""
+    episodes = _read(folder / "episodes.jsonl")
+    if not episodes:
+        raise SystemExit(f"{folder / 'episodes.jsonl'}: no episodes to save")
+    out = folder / "progress.jsonl.gz"
+    tmp = out.with_suffix(".tmp")
+    with gzip.open(tmp, "wt") as f:
+        f.writelines(json.dumps(_slim(e)) + "\n" for e in episodes)
+    tmp.replace(out)
+    rows = Counter((e["planner"], e["mode"]) for e in episodes)
+    print(f"{out}: {len(episodes)} episodes ({', '.join(f'{p} {m} {n}' for (p, m), n in sorted(rows.items()))}), "
+          f"{out.stat().st_size / 1e6:.1f} MB")
+    return out
+
+
+def _drop_saved_progress(folder: Path, rows: set) -> None:
+    """Rows now merged into records.jsonl leave progress.jsonl.gz (removed once it holds none in progress)."""
+    src = folder / "progress.jsonl.gz"
+    if not src.is_file():
+        return
+    with gzip.open(src, "rt") as f:
+        lines = [x for x in f if x.strip()]
+    left = [x for x in lines if _run_row(json.loads(x)) not in rows]
+    if not left:
+        src.unlink()
+    elif len(left) < len(lines):
+        with gzip.open(src, "wt") as f:
+            f.writelines(left)
+
+
+def restore_progress(folder: Path) -> int:
+    """Episodes of progress.jsonl.gz that episodes.jsonl lacks (by key), appended to it; returns how many."""
+    src = folder / "progress.jsonl.gz"
+    if not src.is_file():
+        return 0
+    log = folder / "episodes.jsonl"
+    have = {e["key"] for e in _read(log)}
+    with gzip.open(src, "rt") as f:
+        missing = [line for line in f if line.strip() and json.loads(line)["key"] not in have]
+    with open(log, "a") as f:
+        f.writelines(missing)
+    print(f"{log}: {len(missing)} episodes restored from {src.name} ({len(have)} already there)")
+    return len(missing)
 
 
 def _suite_model_folders() -> list[Path]:
@@ -252,6 +346,19 @@ def per_task_lines(by, suite_eps: list[dict]) -> list[str]:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    act = ap.add_mutually_exclusive_group()
+    act.add_argument("--save-progress", metavar="FOLDER", nargs="?", const=str(EVAL), type=Path,
+                     help="write FOLDER/episodes.jsonl, slimmed, to FOLDER/progress.jsonl.gz (default folder: %(const)s)")
+    act.add_argument("--restore-progress", metavar="FOLDER", nargs="?", const=str(EVAL), type=Path,
+                     help="append FOLDER/progress.jsonl.gz's episodes missing from FOLDER/episodes.jsonl")
+    args = ap.parse_args()
+    if args.save_progress:
+        save_progress(args.save_progress)
+        return
+    if args.restore_progress:
+        restore_progress(args.restore_progress)
+        return
     by = _rows()
     suite_eps = _suite_model_records()  # reads (and rewrites) each suite folder's records once
     (EVAL / "per_task.md").write_text("\n".join(per_task_lines(by, suite_eps)) + "\n")
