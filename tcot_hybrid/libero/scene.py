@@ -7,7 +7,8 @@ runs: the stack's controllers write the Panda's torque motors at ``ctrl_dt`` and
 
 Two changes to LIBERO's scene, both before it compiles: the stack's TCP site (``tcot_tcp``, the same
 site as in ``robots/libero_panda/libero_panda.xml``) is added to ``robot0_link7``, and rendering is set up
-for software GL (no shadows, reflections, skybox or multisampling; collision geoms hidden).
+for software GL (no shadows, reflections, skybox or multisampling; collision geoms hidden; the static geoms in their
+own group, drawn once per layout into planner images: :mod:`tcot_hybrid.rendering`).
 """
 from __future__ import annotations
 
@@ -23,9 +24,13 @@ import numpy as np
 
 from tcot_hybrid.libero import require_libero
 from tcot_hybrid.libero.robot_model import LINK7, TCP_SITE
+from tcot_hybrid.rendering import LayerGroups, split_layers
 
 # robosuite's visual geoms are group 1, collision geoms group 0: hide group 0 in every image.
 COLLISION_GROUP = 0
+# planner images draw the room and the fixtures once per layout (tcot_hybrid.rendering): they and the translucent
+# geoms get groups of their own, which every image shows
+LAYERS = LayerGroups(backdrop=4, translucent=3, frame=1)
 
 
 @contextlib.contextmanager
@@ -143,6 +148,8 @@ class LiberoScene:
         model, data = env.sim.model._model, env.sim.data._data
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
+        mujoco.mj_forward(model, data)
+        split_layers(model, data, render_option(), LAYERS)
         scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
         scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
         return scene
@@ -218,4 +225,5 @@ def _fast_render_settings(model: mujoco.MjModel, max_image_px: int) -> None:
 def render_option() -> mujoco.MjvOption:
     opt = mujoco.MjvOption()
     opt.geomgroup[COLLISION_GROUP] = 0
+    opt.geomgroup[LAYERS.backdrop] = opt.geomgroup[LAYERS.translucent] = 1
     return opt

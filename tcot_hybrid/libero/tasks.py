@@ -128,7 +128,7 @@ class LiberoTask(Task):
 
     # --- scene --------------------------------------------------------------------------------------------
     def build_scene(self, robot, *, timing, scene):
-        from tcot_hybrid.libero.scene import LiberoScene, render_option
+        from tcot_hybrid.libero.scene import LAYERS, LiberoScene, render_option
         from tcot_hybrid.scene import BuiltScene, check_camera
 
         if robot.name != ROBOT:
@@ -147,7 +147,7 @@ class LiberoTask(Task):
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
                                            int(mujoco.mjtRndFlag.mjRND_REFLECTION)),
-                          renderers=self.scene.renderers)
+                          renderers=self.scene.renderers, layer_groups=LAYERS)
 
     def cameras(self) -> tuple[str, ...]:
         return CAMERAS

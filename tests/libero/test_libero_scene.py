@@ -180,3 +180,43 @@ def test_the_next_episode_of_a_task_reuses_the_scenes_renderer_and_sees_the_same
             fresh.close()
     finally:
         sim.close()
+
+
+def test_planner_images_come_from_a_cached_backdrop_and_equal_full_renders(libero_runner):
+    """Most of a LIBERO scene's vertices are the room (tcot_hybrid.rendering): its planner images are composited from a
+    backdrop layer drawn once per layout and camera pose, pixel for pixel what a full render draws."""
+    sim = libero_runner.stack.sim
+    px = libero_runner.cfg.scene.planner_image_px
+    cam = libero_runner.cfg.scene.planner_camera
+    r = sim.renderer(px, px)
+
+    def full():
+        r.update_scene(sim.data, camera=cam, scene_option=sim.render_option)
+        return r.render().copy()
+
+    sim.reset(np.random.default_rng(5))
+    first = sim.render(cam, px, px)
+    layer = sim._layered[(cam, px, px)]
+    assert layer.layered, layer.fallback_reason
+    np.testing.assert_array_equal(first, full())
+    q0 = sim.data.qpos[sim.arm_qpos].copy()
+    for dq in (0.3, -0.4, 0.0):  # the arm moves in front of the room (its aiming line may move backdrop geoms out)
+        sim.data.qpos[sim.arm_qpos] = q0 + dq
+        mujoco.mj_forward(sim.model, sim.data)
+        np.testing.assert_array_equal(sim.render(cam, px, px), full())
+        np.testing.assert_array_equal(sim.render(cam, px, px), full())
+    drawn = layer.backdrop_renders
+    assert drawn <= 1 + layer.whole_frames and len(layer.backdrop) > 0
+    cid = sim.model.camera(cam).id
+    shifted = sim.model.cam_pos[cid].copy()
+    try:
+        sim.model.cam_pos[cid] += [0.03, -0.02, 0.01]  # the camera_shift perturbation: the backdrop is drawn again
+        mujoco.mj_forward(sim.model, sim.data)
+        np.testing.assert_array_equal(sim.render(cam, px, px), full())
+        np.testing.assert_array_equal(sim.render(cam, px, px), full())
+        assert layer.backdrop_renders == drawn + 1 and layer.layered
+    finally:
+        sim.model.cam_pos[cid] = shifted
+        mujoco.mj_forward(sim.model, sim.data)
+    sim.reset(np.random.default_rng(6))  # another layout
+    np.testing.assert_array_equal(sim.render(cam, px, px), full())
