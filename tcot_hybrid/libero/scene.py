@@ -101,6 +101,7 @@ class LiberoScene:
     data: mujoco.MjData
     bddl_path: Path
     renderers: dict = field(default_factory=dict)  # (width, height) -> mujoco.Renderer, kept with the scene
+    layers: LayerGroups | None = None  # the layer groups its geoms were split into (None: not split)
 
     @classmethod
     def acquire(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
@@ -149,8 +150,12 @@ class LiberoScene:
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
         mujoco.mj_forward(model, data)
-        split_layers(model, data, render_option(), LAYERS)
-        scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
+        try:
+            split_layers(model, data, render_option(None), LAYERS)
+            layers = LAYERS
+        except ValueError:  # the scene uses a layer's group itself: its images stay single full renders (slower)
+            layers = None
+        scene = cls(env=env, model=model, data=data, bddl_path=bddl_path, layers=layers)
         scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
         return scene
 
@@ -222,8 +227,10 @@ def _fast_render_settings(model: mujoco.MjModel, max_image_px: int) -> None:
     model.light_castshadow[:] = 0
 
 
-def render_option() -> mujoco.MjvOption:
+def render_option(layers: LayerGroups | None) -> mujoco.MjvOption:
+    """Collision geoms hidden; the layer groups shown where the scene was split into them."""
     opt = mujoco.MjvOption()
     opt.geomgroup[COLLISION_GROUP] = 0
-    opt.geomgroup[LAYERS.backdrop] = opt.geomgroup[LAYERS.translucent] = 1
+    if layers is not None:
+        opt.geomgroup[layers.backdrop] = opt.geomgroup[layers.translucent] = 1
     return opt

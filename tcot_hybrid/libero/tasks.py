@@ -128,7 +128,7 @@ class LiberoTask(Task):
 
     # --- scene --------------------------------------------------------------------------------------------
     def build_scene(self, robot, *, timing, scene):
-        from tcot_hybrid.libero.scene import LAYERS, LiberoScene, render_option
+        from tcot_hybrid.libero.scene import LiberoScene, render_option
         from tcot_hybrid.scene import BuiltScene, check_camera
 
         if robot.name != ROBOT:
@@ -143,11 +143,11 @@ class LiberoTask(Task):
         self.planner_camera, self.planner_image_px = scene.planner_camera, scene.planner_image_px
         objects = libero_objects(self.scene)
         return BuiltScene(model=self.scene.model, data=self.scene.data, objects=objects,
-                          support_z=self.scene.support_z(), render_option=render_option(),
+                          support_z=self.scene.support_z(), render_option=render_option(self.scene.layers),
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
                                            int(mujoco.mjtRndFlag.mjRND_REFLECTION)),
-                          renderers=self.scene.renderers, layer_groups=LAYERS)
+                          renderers=self.scene.renderers, layer_groups=self.scene.layers)
 
     def cameras(self) -> tuple[str, ...]:
         return CAMERAS
