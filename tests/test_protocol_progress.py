@@ -1,0 +1,61 @@
+"""The paper's-protocol tables (docs/libero-planner/protocol.py): a row cut off midway is carried to another machine
+whole (what the detector figures read included), and a row still running never reaches the tables."""
+import importlib
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from tcot_hybrid.evaluation.aggregation import aggregate, detector_metrics
+
+HERE = Path(__file__).resolve().parent.parent / "docs" / "libero-planner"
+
+
+@pytest.fixture(scope="module")
+def protocol():
+    sys.path.insert(0, str(HERE))
+    try:
+        yield importlib.import_module("protocol")
+    finally:
+        sys.path.remove(str(HERE))
+
+
+def _episode(suite, task, seed, success, mode="glsr"):
+    events = [{"t": 0.1, "kind": "plan_adopted", "step": 0, "waypoints": 26},
+              {"t": 1.0, "kind": "supervisor", "step": 3, "p_success": 0.2, "true_success": False, "state": "local"},
+              {"t": 1.1, "kind": "stop_check", "step": 4, "p_success": 0.9, "true_success": success, "hold": 1}]
+    return {"task": f"{suite}:{task}", "suite": suite, "planner": "learned", "mode": mode, "perturb": "none",
+            "seed": seed, "success": success, "fault": None, "stopped_by": "simulator", "steps": 40, "events": events,
+            "key": f"{suite}:{task}|learned|{mode}|none|{seed}", "robot": "libero_panda", "controller": "computed_torque",
+            "ik": "mink", "sweep": "-", "sim_time_s": 4.0, "wall_time_s": 2.0}
+
+
+def test_saved_progress_restores_every_episode_and_the_same_figures(protocol, tmp_path):
+    eps = [_episode("libero_10", f"t{i % 3}", i, i % 2 == 0) for i in range(7)]
+    (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in eps))
+    protocol.save_progress(tmp_path)
+    other = tmp_path / "other_machine"
+    other.mkdir()
+    (other / "progress.jsonl.gz").write_bytes((tmp_path / "progress.jsonl.gz").read_bytes())
+    (other / "episodes.jsonl").write_text(json.dumps(eps[0]) + "\n")  # one episode is there already
+    assert protocol.restore_progress(other) == 6
+    back = [json.loads(x) for x in (other / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(e["key"] for e in back) == sorted(e["key"] for e in eps)
+    assert detector_metrics(back) == detector_metrics(eps)
+    assert aggregate(back) == aggregate(eps)
+    assert all(ev["kind"] != "plan_adopted" for e in back[1:] for ev in e["events"])  # only the detector's calls
+
+
+def test_a_row_still_running_is_left_out_of_the_tables(protocol, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(protocol, "PER_SUITE", 2)
+    whole = [_episode(s, "t", seed, True, mode="global") for s in protocol.SUITES for seed in (0, 1)]
+    running = [_episode("libero_10", "t", 0, False)]
+    got = protocol._complete_rows(whole + running, tmp_path)
+    assert sorted(e["key"] for e in got) == sorted(e["key"] for e in whole)
+    assert "the learned glsr row is in progress in episodes.jsonl (1 of 8 episodes)" in capsys.readouterr().out
+
+
+def test_restoring_without_saved_progress_restores_nothing(protocol, tmp_path):
+    assert protocol.restore_progress(tmp_path) == 0
+    assert not (tmp_path / "episodes.jsonl").exists()
