@@ -15,7 +15,6 @@ import numpy as np
 from tcot_hybrid.config import require_int, require_positive
 
 if TYPE_CHECKING:
-    from tcot_hybrid.rendering import LayerGroups
     from tcot_hybrid.robot import RobotSpec
     from tcot_hybrid.tasks.objects import ObjectInfo
 
@@ -70,10 +69,6 @@ class BuiltScene:
     renderers:     a renderer cache the scene owns and keeps across the episodes that reuse it (a LIBERO scene's
                    renderer takes ~1 s to make: its textures go to the GL context); None = each simulation makes
                    and closes its own
-    layer_groups:  the groups :func:`tcot_hybrid.rendering.split_layers` gave the scene's static geoms and its
-                   translucent ones (``render_option`` shows them): RGB images draw the static ones once per layout
-                   and camera pose (:class:`tcot_hybrid.rendering.BackdropRenderer`; the same pixels, at about 60 %
-                   of the cost in LIBERO's rooms). None = every image is one full render
     """
 
     model: mujoco.MjModel
@@ -83,7 +78,6 @@ class BuiltScene:
     render_option: mujoco.MjvOption | None = None
     scene_flags_off: tuple[int, ...] = ()  # mjtRndFlag values switched off in every renderer (e.g. skybox)
     renderers: dict | None = None
-    layer_groups: LayerGroups | None = None
 
 
 def check_camera(model: mujoco.MjModel, name: str) -> None:

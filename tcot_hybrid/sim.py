@@ -17,7 +17,6 @@ import numpy as np
 
 from tcot_hybrid.config import TimingConfig
 from tcot_hybrid.errors import SimulationError
-from tcot_hybrid.rendering import BackdropRenderer
 from tcot_hybrid.robot import RobotSpec
 from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.tasks import Task, World
@@ -78,8 +77,6 @@ class Simulation:
         # (width, height) -> renderer; the scene's own cache when it keeps one across episodes
         self._owns_renderers = built.renderers is None
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {} if built.renderers is None else built.renderers
-        self._layer_groups = built.layer_groups
-        self._layered: dict[tuple[str, int, int], BackdropRenderer] = {}  # (camera, width, height)
         self._fault: SimFault | None = None
         self._time_offset = 0.0  # [s] simulated time lost to MuJoCo's own resets of a diverged state
 
@@ -187,12 +184,6 @@ class Simulation:
                markers: list[tuple[np.ndarray, tuple]] | None = None) -> np.ndarray:
         """RGB (or depth [m]) image; ``markers`` = [(points (N,3) [m], rgba)] drawn as small spheres in
         the scene (e.g. a lifted 3D path) — for videos only, never for planner images."""
-        if self._layer_groups is not None and not depth and not markers:
-            key = (camera, width, height)
-            if key not in self._layered:
-                self._layered[key] = BackdropRenderer(self.renderer(width, height), self.model, camera,
-                                                      self.render_option, self._layer_groups)
-            return self._layered[key].render(self.data)
         r = self.renderer(width, height)
         if self.render_option is None:
             r.update_scene(self.data, camera=camera)
@@ -214,7 +205,6 @@ class Simulation:
         return r.render().copy()
 
     def close(self) -> None:
-        self._layered.clear()
         if self._owns_renderers:
             for r in self._renderers.values():
                 r.close()

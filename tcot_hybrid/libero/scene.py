@@ -7,8 +7,7 @@ runs: the stack's controllers write the Panda's torque motors at ``ctrl_dt`` and
 
 Two changes to LIBERO's scene, both before it compiles: the stack's TCP site (``tcot_tcp``, the same
 site as in ``robots/libero_panda/libero_panda.xml``) is added to ``robot0_link7``, and rendering is set up
-for software GL (no shadows, reflections, skybox or multisampling; collision geoms hidden; the static geoms in their
-own group, drawn once per layout into planner images: :mod:`tcot_hybrid.rendering`).
+for software GL (no shadows, reflections, skybox or multisampling; collision geoms hidden).
 """
 from __future__ import annotations
 
@@ -24,13 +23,9 @@ import numpy as np
 
 from tcot_hybrid.libero import require_libero
 from tcot_hybrid.libero.robot_model import LINK7, TCP_SITE
-from tcot_hybrid.rendering import LayerGroups, split_layers
 
 # robosuite's visual geoms are group 1, collision geoms group 0: hide group 0 in every image.
 COLLISION_GROUP = 0
-# planner images draw the room and the fixtures once per layout (tcot_hybrid.rendering): they and the translucent
-# geoms get groups of their own, which every image shows
-LAYERS = LayerGroups(backdrop=4, translucent=3, frame=1)
 
 
 @contextlib.contextmanager
@@ -101,7 +96,6 @@ class LiberoScene:
     data: mujoco.MjData
     bddl_path: Path
     renderers: dict = field(default_factory=dict)  # (width, height) -> mujoco.Renderer, kept with the scene
-    layers: LayerGroups | None = None  # the layer groups its geoms were split into (None: not split)
 
     @classmethod
     def acquire(cls, bddl_path: str | Path, *, sim_dt: float, max_image_px: int) -> "LiberoScene":
@@ -149,13 +143,7 @@ class LiberoScene:
         model, data = env.sim.model._model, env.sim.data._data
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
-        mujoco.mj_forward(model, data)
-        try:
-            split_layers(model, data, render_option(None), LAYERS)
-            layers = LAYERS
-        except ValueError:  # the scene uses a layer's group itself: its images stay single full renders (slower)
-            layers = None
-        scene = cls(env=env, model=model, data=data, bddl_path=bddl_path, layers=layers)
+        scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
         scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
         return scene
 
@@ -227,10 +215,7 @@ def _fast_render_settings(model: mujoco.MjModel, max_image_px: int) -> None:
     model.light_castshadow[:] = 0
 
 
-def render_option(layers: LayerGroups | None) -> mujoco.MjvOption:
-    """Collision geoms hidden; the layer groups shown where the scene was split into them."""
+def render_option() -> mujoco.MjvOption:
     opt = mujoco.MjvOption()
     opt.geomgroup[COLLISION_GROUP] = 0
-    if layers is not None:
-        opt.geomgroup[layers.backdrop] = opt.geomgroup[layers.translucent] = 1
     return opt

@@ -143,11 +143,11 @@ class LiberoTask(Task):
         self.planner_camera, self.planner_image_px = scene.planner_camera, scene.planner_image_px
         objects = libero_objects(self.scene)
         return BuiltScene(model=self.scene.model, data=self.scene.data, objects=objects,
-                          support_z=self.scene.support_z(), render_option=render_option(self.scene.layers),
+                          support_z=self.scene.support_z(), render_option=render_option(),
                           scene_flags_off=(int(mujoco.mjtRndFlag.mjRND_SKYBOX),
                                            int(mujoco.mjtRndFlag.mjRND_SHADOW),
                                            int(mujoco.mjtRndFlag.mjRND_REFLECTION)),
-                          renderers=self.scene.renderers, layer_groups=self.scene.layers)
+                          renderers=self.scene.renderers)
 
     def cameras(self) -> tuple[str, ...]:
         return CAMERAS
