@@ -105,11 +105,26 @@ def test_in_episode_auroc_counts_each_step_once():
     assert "premature stops" in markdown({"cells": [cell], "detector": detector_metrics(recs)})
 
 
-def test_evaluate_resumes(tmp_path):
+def test_evaluate_resumes(tmp_path, monkeypatch):
+    import torch
+
+    import tcot_hybrid.evaluation.running as running
+
+    for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(k, raising=False)
+    threads, real = [], running.run_job
+
+    def spy(job):  # episodes in this process run on one torch thread, as in a worker
+        threads.append(torch.get_num_threads())
+        return real(job)
+
+    monkeypatch.setattr(running, "run_job", spy)
     jobs = make_jobs(RunConfig(), tasks=["goal_open_drawer"], planners=["oracle"], modes=["global"],
                      robots=["panda"], controllers=["computed_torque"], iks=["mink"], episodes=2, seed_start=1000)
+    torch.set_num_threads(2)
     first = evaluate(jobs, tmp_path, workers=1, progress=False)
     assert first["ran_now"] == 2 and first["cells"][0]["successes"] == 2
+    assert threads == [1, 1] and torch.get_num_threads() == 2
     again = evaluate(jobs, tmp_path, workers=1, progress=False)
     assert again["ran_now"] == 0 and again["cells"] == first["cells"]
 

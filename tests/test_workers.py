@@ -3,7 +3,7 @@ import os
 
 import pytest
 
-from tcot_hybrid.workers import ONE_THREAD_ENV, worker_pool
+from tcot_hybrid.workers import ONE_THREAD_ENV, one_torch_thread, worker_pool
 
 
 def _threads_after_job_imports(_):
@@ -34,3 +34,17 @@ def test_bad_worker_count_names_the_value(bad):
     with pytest.raises(ValueError, match="workers must be an integer >= 1, got"):
         with worker_pool(bad):
             pass
+
+
+def test_episodes_in_this_process_run_on_one_torch_thread(monkeypatch):
+    import torch
+
+    for k in ONE_THREAD_ENV:
+        monkeypatch.delenv(k, raising=False)
+    torch.set_num_threads(2)
+    with one_torch_thread():
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == 2  # restored
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")  # the user chose: left alone
+    with one_torch_thread():
+        assert torch.get_num_threads() == 2

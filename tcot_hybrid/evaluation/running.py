@@ -14,7 +14,7 @@ from tcot_hybrid.jsonio import atomic_write_text, check_output_dir
 from tcot_hybrid.evaluation.aggregation import aggregate, detector_metrics
 from tcot_hybrid.evaluation.jobs import Job
 from tcot_hybrid.evaluation.reports import markdown
-from tcot_hybrid.workers import worker_pool
+from tcot_hybrid.workers import one_torch_thread, worker_pool
 
 DETECTOR_STEPS_AFTER_SUCCESS = 5  # planner steps past success on which the detector is probed
 
@@ -98,6 +98,7 @@ def evaluate(jobs: list[Job], out_dir: str | Path, *, workers: int = 2, progress
         if ray_address:
             results = _ray_results(todo, ray_address)
         elif workers <= 1:
+            stack.enter_context(one_torch_thread())
             results = map(run_job, todo)
         else:
             pool = stack.enter_context(worker_pool(workers, maxtasksperchild=50))
