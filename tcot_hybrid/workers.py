@@ -13,6 +13,11 @@ from multiprocessing.pool import Pool
 ONE_THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
+def user_chose_threads() -> bool:
+    """The environment sets a thread count (``OMP_NUM_THREADS`` or ``MKL_NUM_THREADS``): it is left as it is."""
+    return any(os.environ.get(k) is not None for k in ONE_THREAD_ENV)
+
+
 @contextlib.contextmanager
 def worker_pool(workers: int, **pool_kwargs) -> Iterator[Pool]:
     """A spawn pool of ``workers`` processes that start with one compute thread each (``ONE_THREAD_ENV``; if the
@@ -23,7 +28,7 @@ def worker_pool(workers: int, **pool_kwargs) -> Iterator[Pool]:
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     saved = {k: os.environ.get(k) for k in ONE_THREAD_ENV}
-    if all(v is None for v in saved.values()):
+    if not user_chose_threads():
         os.environ.update(ONE_THREAD_ENV)
     try:
         pool = mp.get_context("spawn").Pool(workers, **pool_kwargs)
@@ -42,11 +47,11 @@ def worker_pool(workers: int, **pool_kwargs) -> Iterator[Pool]:
 
 @contextlib.contextmanager
 def one_torch_thread() -> Iterator[None]:
-    """Episodes run in this process (``--workers 1``) with torch on one thread, as in a worker: with torch's default
-    of one thread per core, a LIBERO episode took 200-230 s instead of 45 s while two other processes shared the two
-    cores, and the network's outputs are the same whatever the worker count. Left alone when the environment sets
-    ``OMP_NUM_THREADS`` or ``MKL_NUM_THREADS`` (the user chose the threads); restored on exit."""
-    if any(os.environ.get(k) is not None for k in ONE_THREAD_ENV):
+    """Episodes run in this process (one worker: eval, collect, replay) with torch on one thread, as in a worker: with
+    torch's default of one thread per core, a LIBERO episode took 200-230 s instead of 45 s while two other processes
+    shared the two cores, and the network's outputs are the same whatever the worker count. Left alone when
+    :func:`user_chose_threads`; restored on exit."""
+    if user_chose_threads():
         yield
         return
     import torch

@@ -32,7 +32,7 @@ from tcot_hybrid.data.dataset import (  # noqa: E402
 )
 from tcot_hybrid.config import require_int  # noqa: E402
 from tcot_hybrid.errors import ConfigError, DatasetError  # noqa: E402
-from tcot_hybrid.workers import worker_pool  # noqa: E402
+from tcot_hybrid.workers import one_torch_thread, worker_pool  # noqa: E402
 
 STEPS_AFTER_SUCCESS = 5  # planner steps recorded after the task predicate first holds
 # ... and on LIBERO, before those, the plan is carried out (at most this many planner steps): LIBERO judges several
@@ -386,6 +386,7 @@ def collect(base_cfg, *, tasks: list[str], seeds: list[int], out: str | Path, wo
                 for (t, s, p) in todo]
         with contextlib.ExitStack() as stack:
             if workers == 1 or len(cfgs) <= 1:
+                stack.enter_context(one_torch_thread())
                 results = map(_worker, [(c, image_every) for c in cfgs])
             else:
                 pool = stack.enter_context(worker_pool(min(workers, len(cfgs)), maxtasksperchild=40))

@@ -29,7 +29,7 @@ from tcot_hybrid.data.labels import (GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POIN
 from tcot_hybrid.errors import ConfigError, PlanningError
 from tcot_hybrid.planners.base import Observation, Planner
 from tcot_hybrid.planners.learned import LearnedPlannerConfig, height_plan
-from tcot_hybrid.workers import worker_pool
+from tcot_hybrid.workers import one_torch_thread, worker_pool
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -146,9 +146,10 @@ def replay_file(path: str | Path, *, config: ReplayConfig = ReplayConfig(), task
                     rows.append(r)
                     bar.update()
         else:
-            for j in jobs:
-                rows.append(_job(j))
-                bar.update()
+            with one_torch_thread():
+                for j in jobs:
+                    rows.append(_job(j))
+                    bar.update()
     rows.sort(key=lambda r: (r["task"], r["seed"]))
     per_task: dict[str, dict] = {}
     for r in rows:
