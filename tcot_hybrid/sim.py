@@ -17,7 +17,6 @@ import numpy as np
 
 from tcot_hybrid.config import TimingConfig
 from tcot_hybrid.errors import SimulationError
-from tcot_hybrid.frustum import OffscreenMeshCulling
 from tcot_hybrid.robot import RobotSpec
 from tcot_hybrid.scene import SceneConfig
 from tcot_hybrid.tasks import Task, World
@@ -78,7 +77,6 @@ class Simulation:
         # (width, height) -> renderer; the scene's own cache when it keeps one across episodes
         self._owns_renderers = built.renderers is None
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {} if built.renderers is None else built.renderers
-        self._culling = OffscreenMeshCulling(m)  # meshes a camera cannot see are not drawn for it
         self._fault: SimFault | None = None
         self._time_offset = 0.0  # [s] simulated time lost to MuJoCo's own resets of a diverged state
 
@@ -187,18 +185,10 @@ class Simulation:
         """RGB (or depth [m]) image; ``markers`` = [(points (N,3) [m], rgba)] drawn as small spheres in
         the scene (e.g. a lifted 3D path) — for videos only, never for planner images."""
         r = self.renderer(width, height)
-        cam_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
-        cull = self._culling.applies(cam_id, r.scene)
-        if cull:
-            self._culling.hide(self.data, cam_id, width, height)
-        try:
-            if self.render_option is None:
-                r.update_scene(self.data, camera=camera)
-            else:
-                r.update_scene(self.data, camera=camera, scene_option=self.render_option)
-        finally:
-            if cull:
-                self._culling.restore()
+        if self.render_option is None:
+            r.update_scene(self.data, camera=camera)
+        else:
+            r.update_scene(self.data, camera=camera, scene_option=self.render_option)
         for points, rgba in markers or ():
             scn = r.scene
             for p in points:

@@ -11,11 +11,6 @@ from multiprocessing.pool import Pool
 # W workers on W cores: torch's default of one thread per core in every worker oversubscribes them (measured here:
 # ~15 % more CPU per LIBERO episode on an idle machine; batch-1 inference up to ~40x slower under load)
 ONE_THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-# Software GL (llvmpipe) rasterizes on helper threads, one per core by default; a worker already owns a core, and on
-# 128-px planner images the hand-off costs more than it saves: rasterizing in the calling thread made a LIBERO
-# frame ~15 % cheaper with two workers on two cores, the same image pixel for pixel (docs/libero-planner.md,
-# "Rendering cost"). Read when the process's first GL context is made; a value the user set is kept.
-RENDER_ENV = {"LP_NUM_THREADS": "0"}
 
 
 def user_chose_threads() -> bool:
@@ -26,18 +21,15 @@ def user_chose_threads() -> bool:
 @contextlib.contextmanager
 def worker_pool(workers: int, **pool_kwargs) -> Iterator[Pool]:
     """A spawn pool of ``workers`` processes that start with one compute thread each (``ONE_THREAD_ENV``; if the
-    environment already sets either variable, the user chose the threads, and it is left as it is) and render
-    without rasterizer threads (``RENDER_ENV``, unless set). The variables go into the environment the workers start from, for the
+    environment already sets either variable, the user chose the threads, and it is left as it is). The variables go into the environment the workers start from, for the
     pool's whole life (``maxtasksperchild`` starts new workers): a worker setting them itself is too late, since
     its first imports (the IK's QP solvers) have started OpenMP by then. The parent's environment is restored and
     the pool terminated on exit."""
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
-    saved = {k: os.environ.get(k) for k in (*ONE_THREAD_ENV, *RENDER_ENV)}
+    saved = {k: os.environ.get(k) for k in ONE_THREAD_ENV}
     if not user_chose_threads():
         os.environ.update(ONE_THREAD_ENV)
-    for k, v in RENDER_ENV.items():
-        os.environ.setdefault(k, v)
     try:
         pool = mp.get_context("spawn").Pool(workers, **pool_kwargs)
         try:

@@ -3,7 +3,7 @@ import os
 
 import pytest
 
-from tcot_hybrid.workers import ONE_THREAD_ENV, RENDER_ENV, one_torch_thread, worker_pool
+from tcot_hybrid.workers import ONE_THREAD_ENV, one_torch_thread, worker_pool
 
 
 def _threads_after_job_imports(_):
@@ -11,10 +11,6 @@ def _threads_after_job_imports(_):
     import torch
 
     return torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
-
-
-def _render_threads(_):
-    return os.environ.get("LP_NUM_THREADS")
 
 
 def test_workers_start_with_one_compute_thread(monkeypatch):
@@ -31,18 +27,6 @@ def test_a_thread_count_the_user_set_is_kept(monkeypatch):
     with worker_pool(1) as pool:
         assert pool.map(_threads_after_job_imports, [0]) == [(2, "2")]
     assert os.environ["OMP_NUM_THREADS"] == "2"
-
-
-def test_workers_rasterize_in_their_own_thread_unless_the_user_chose(monkeypatch):
-    for k in RENDER_ENV:
-        monkeypatch.delenv(k, raising=False)
-    with worker_pool(1) as pool:
-        assert pool.map(_render_threads, [0]) == ["0"]
-    assert "LP_NUM_THREADS" not in os.environ  # the parent's environment is restored
-    monkeypatch.setenv("LP_NUM_THREADS", "2")
-    with worker_pool(1) as pool:
-        assert pool.map(_render_threads, [0]) == ["2"]
-    assert os.environ["LP_NUM_THREADS"] == "2"
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
