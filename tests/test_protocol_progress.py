@@ -56,6 +56,23 @@ def test_a_row_still_running_is_left_out_of_the_tables(protocol, tmp_path, monke
     assert "the learned glsr row is in progress in episodes.jsonl (1 of 8 episodes)" in capsys.readouterr().out
 
 
+def test_a_rerun_half_done_is_in_progress_and_not_mixed_with_the_run_before(protocol, tmp_path, capsys):
+    """A complete row, then a rerun (other defaults or code: other keys) of part of it: the tables keep the first run
+    whole until the rerun has every init state, then take the rerun whole."""
+    protocol.PER_SUITE, saved = 2, protocol.PER_SUITE
+    try:
+        first = [_episode(s, "t", seed, True) for s in protocol.SUITES for seed in (0, 1)]
+        rerun = [{**e, "key": e["key"] + "|new", "success": False} for e in first]
+        assert protocol._complete_rows(first + rerun[:3], tmp_path) == []
+        assert "the learned glsr row is in progress in episodes.jsonl (3 of 8 episodes)" in capsys.readouterr().out
+        got = protocol._complete_rows(first + rerun, tmp_path)
+        assert sorted(e["key"] for e in got) == sorted(e["key"] for e in rerun)
+        # resumed in parts (no episode twice), and the first run alone: each is one run
+        assert len(protocol._complete_rows(first[:5] + first[5:], tmp_path)) == 8
+    finally:
+        protocol.PER_SUITE = saved
+
+
 def test_restoring_without_saved_progress_restores_nothing(protocol, tmp_path):
     assert protocol.restore_progress(tmp_path) == 0
     assert not (tmp_path / "episodes.jsonl").exists()

@@ -100,18 +100,29 @@ def _row_size(row: tuple[str, str], suites: set[str]) -> int:
 def _complete_rows(episodes: list[dict], folder: Path) -> list[dict]:
     """The episodes of the rows episodes.jsonl holds whole (every planned init state of every suite the row covers:
     the four here, a suite-model folder its one suite); a row still running is named and left out, so the tables
-    keep its last complete run instead of mixing two runs' configurations."""
-    by: dict = defaultdict(dict)
+    keep its last complete run instead of mixing two runs' configurations.
+
+    ``tcot eval`` appends, and a resumed run never repeats an episode it has: in a row's lines, an init state that
+    comes again starts a new run of the row (other defaults, code or checkpoint), and the row's latest run is what
+    follows the last such restart. A rerun half done is therefore in progress, and the run before it is not filled
+    in around it. (A run abandoned before it was complete and followed by another is told apart only from the first
+    init state the second repeats.)"""
+    by: dict = defaultdict(list)
     for e in episodes:
-        by[_run_row(e)][(e["task"], e["seed"])] = e  # later lines win
+        by[_run_row(e)].append(e)
     suites = {folder.name} if folder.parent == SUITE_EVAL else set(SUITES)
     out = []
     for (planner, mode, perturb), eps in sorted(by.items()):
+        latest: dict = {}
+        for e in eps:
+            if (e["task"], e["seed"]) in latest:
+                latest = {}  # a new run of this row starts here
+            latest[(e["task"], e["seed"])] = e
         want = _row_size((planner, mode), suites)
-        if len(eps) >= want:
-            out += eps.values()
+        if len(latest) >= want:
+            out += latest.values()
         else:
-            print(f"{folder.name}: the {planner} {mode} row is in progress in episodes.jsonl ({len(eps)} of {want} "
+            print(f"{folder.name}: the {planner} {mode} row is in progress in episodes.jsonl ({len(latest)} of {want} "
                   "episodes): not merged until it is complete")
     return out
 
@@ -287,7 +298,12 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
         faults = Counter(str(e["fault"])[:60] for e in eps if e["fault"])
         why = ", ".join(f"{k} x{v}" for k, v in faults.most_common())
         worst = max(e["max_reference_limit_excess_rad"] for e in eps)
+        # what the row costs whatever machine load its parts ran under: the episodes' own wall times, summed
+        work_min = sum(e["wall_time_s"] for e in eps) / 60
+        by_suite = ", ".join(f"{s} {sum(e['wall_time_s'] for e in eps if e['suite'] == s) / 60:.0f}" for s in SUITES)
         lines.append(f"- {label}: {len(eps)} episodes" + (f"; run: {how}" if how else "")
+                     + f"; the episodes' own wall times sum to {work_min:.0f} worker-min ({by_suite}), "
+                       f"{work_min / 2:.0f} min on 2 workers before scene builds and worker starts"
                      + f"; {sum(faults.values())} faulted" + (f" ({why})" if why else "")
                      + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
