@@ -298,7 +298,7 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
         faults = Counter(str(e["fault"])[:60] for e in eps if e["fault"])
         why = ", ".join(f"{k} x{v}" for k, v in faults.most_common())
         worst = max(e["max_reference_limit_excess_rad"] for e in eps)
-        # what the row costs whatever machine load its parts ran under: the episodes' own wall times, summed
+        # what the row costs without the gaps between its parts (runs cut off and resumed): the episodes' own wall times
         work_min = sum(e["wall_time_s"] for e in eps) / 60
         by_suite = ", ".join(f"{s} {sum(e['wall_time_s'] for e in eps if e['suite'] == s) / 60:.0f}" for s in SUITES)
         lines.append(f"- {label}: {len(eps)} episodes" + (f"; run: {how}" if how else "")
