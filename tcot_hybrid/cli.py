@@ -317,12 +317,13 @@ def cmd_eval(argv: list[str]) -> int:
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
                      episodes=cmd.episodes, seed_start=cmd.seed_start,
                      perturbs=_split(cmd.perturb, cmd.cfg.perturb.name), sweep=cmd.sweep)
-    seen = set()
-    for j in jobs:  # every name checked before any episode runs
+    last_seed = {}  # every name checked before any episode runs, with each cell's last seed (a shipped init state)
+    for j in jobs:
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
-        if key not in seen:
-            seen.add(key)
-            validate_names(j.cfg)
+        if key not in last_seed or j.cfg.seed > last_seed[key].seed:
+            last_seed[key] = j.cfg
+    for cfg in last_seed.values():
+        validate_names(cfg)
     result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
     if cmd.readme:
         from tcot_hybrid.markdown import update_readme_section
