@@ -175,6 +175,9 @@ def cmd_run(argv: list[str]) -> int:
     for flag, path in (("--video", cmd.video), ("--timeline", cmd.timeline)):
         if path is not None:
             check_output_file(path, what=flag)
+    from tcot_hybrid.planners import check_checkpoint_used
+
+    check_checkpoint_used(cmd.cfg.checkpoint, [cmd.cfg.planner])
     try:
         runner = EpisodeRunner(cmd.cfg)
     except BaseException as exc:  # refused or crashed before anything moved: the record says so
@@ -317,6 +320,9 @@ def cmd_eval(argv: list[str]) -> int:
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
                      episodes=cmd.episodes, seed_start=cmd.seed_start,
                      perturbs=_split(cmd.perturb, cmd.cfg.perturb.name), sweep=cmd.sweep)
+    from tcot_hybrid.planners import check_checkpoint_used
+
+    check_checkpoint_used(cmd.cfg.checkpoint, sorted({j.cfg.planner for j in jobs}))
     last_seed = {}  # every name checked before any episode runs, with each cell's last seed (a shipped init state)
     for j in jobs:
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
