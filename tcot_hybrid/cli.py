@@ -282,7 +282,7 @@ class EvalCommand:
     episodes: int = 20
     """Seeds per cell."""
     seed_start: int = 1000
-    """First seed; seeds are seed_start .. seed_start + episodes - 1."""
+    """First seed; seeds are seed_start .. seed_start + episodes - 1 (LIBERO's shipped init states: 0-49)."""
     workers: int = 2
     """Worker processes."""
     out: Path = Path("runs/eval")

@@ -177,7 +177,7 @@ class LiberoTask(Task):
             n = len(self.init_states())  # a missing file is refused now, before anything is built
             if not 0 <= seed < n:
                 raise ConfigError(f"seed {seed} is not a shipped init state of LIBERO task {self.name!r}: it ships "
-                                  f"{n}, seeds 0-{n - 1} (--episodes and --seed-start within them); "
+                                  f"{n}, seeds 0-{n - 1} (the paper's protocol: --seed-start 0 --episodes {n}); "
                                   f"use --init sampled for other layouts")
 
     def reset(self, world: World, rng: np.random.Generator) -> None:
