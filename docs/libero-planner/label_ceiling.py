@@ -91,8 +91,8 @@ def write_section() -> None:
         d = sum(rep["per_task"][t]["demos"] for t in TASKS if t in rep["per_task"])
         rows.append(f"| {v[0]} | {v[1]} | {v[2]} | {v[3]} | " + " | ".join(cells) + f" | **{n}/{d}** |")
     text = ("Label replays (`python docs/libero-planner/label_ceiling.py`; each demo's own t = 0 global label with its "
-            "orientation, one frozen global plan, no local replanning; 5 demos a task, training seeds 0-4; reports in "
-            "`docs/libero-planner/label-ceiling/`):\n\n"
+            "orientation, one frozen global plan, no local replanning, on the demo's own sampled layout; the successful ones "
+            "of 5 demos a task, training seeds 0-4; reports in `docs/libero-planner/label-ceiling/`):\n\n"
             "| L_g | path labelled | points placed by | points a piece | " + " | ".join(SHORT) + " | all |\n"
             "|---|---|---|---|" + "---|" * (len(SHORT) + 1) + "\n" + "\n".join(rows))
     update_readme_section(HERE.parent / "libero-planner.md", "libero-label-ceiling", text)
