@@ -175,6 +175,9 @@ def cmd_run(argv: list[str]) -> int:
     for flag, path in (("--video", cmd.video), ("--timeline", cmd.timeline)):
         if path is not None:
             check_output_file(path, what=flag)
+    from tcot_hybrid.planners import check_checkpoint_used
+
+    check_checkpoint_used(cmd.cfg.checkpoint, [cmd.cfg.planner])
     try:
         runner = EpisodeRunner(cmd.cfg)
     except BaseException as exc:  # refused or crashed before anything moved: the record says so
@@ -279,7 +282,7 @@ class EvalCommand:
     episodes: int = 20
     """Seeds per cell."""
     seed_start: int = 1000
-    """First seed; seeds are seed_start .. seed_start + episodes - 1."""
+    """First seed; seeds are seed_start .. seed_start + episodes - 1 (LIBERO's shipped init states: 0-49)."""
     workers: int = 2
     """Worker processes."""
     out: Path = Path("runs/eval")
@@ -317,12 +320,16 @@ def cmd_eval(argv: list[str]) -> int:
                      controllers=_split(cmd.controllers, cmd.cfg.controller), iks=_split(cmd.iks, cmd.cfg.ik),
                      episodes=cmd.episodes, seed_start=cmd.seed_start,
                      perturbs=_split(cmd.perturb, cmd.cfg.perturb.name), sweep=cmd.sweep)
-    seen = set()
-    for j in jobs:  # every name checked before any episode runs
+    from tcot_hybrid.planners import check_checkpoint_used
+
+    check_checkpoint_used(cmd.cfg.checkpoint, sorted({j.cfg.planner for j in jobs}))
+    last_seed = {}  # every name checked before any episode runs, with each cell's last seed (a shipped init state)
+    for j in jobs:
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
-        if key not in seen:
-            seen.add(key)
-            validate_names(j.cfg)
+        if key not in last_seed or j.cfg.seed > last_seed[key].seed:
+            last_seed[key] = j.cfg
+    for cfg in last_seed.values():
+        validate_names(cfg)
     result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
     if cmd.readme:
         from tcot_hybrid.markdown import update_readme_section

@@ -40,7 +40,7 @@ class RunConfig:
         own robot: panda in the workcell, libero_panda on a LIBERO task (its scenes mount that Panda).
     seed: episode seed; the same seed and config give a bit-identical run.
     init: how the episode's scene is laid out: "shipped" (a LIBERO task's shipped init state number
-        seed mod N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
+        seed, 0 <= seed < N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
         task's default (LIBERO: shipped; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
     stop_on: what ends the episode before its time limit. "simulator": the task's success predicate

@@ -3,10 +3,12 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 ENV = {**os.environ, "MUJOCO_GL": "egl"}
+WORKCELL_CHECKPOINT = str(Path(__file__).parents[1] / "tcot_hybrid" / "checkpoints" / "panda_default.safetensors")
 
 
 def tcot(*args, timeout=300):
@@ -47,6 +49,11 @@ def test_run_writes_the_episode_record(tmp_path):
     (["run", "--task", "goal_open_drawer", "--perturb", "meteor"], "object_moved"),
     (["run", "--task", "goal_open_drawer", "--controller-params", "kp_scael", "2"], "kp_scale"),
     (["eval", "--suite", "nope"], "spatial"),
+    # a checkpoint no planner of the run loads would be ignored
+    (["run", "--task", "goal_open_drawer", "--planner", "oracle", "--checkpoint", WORKCELL_CHECKPOINT],
+     "loaded by no planner of this run (oracle); the planners that load one: direct, learned"),
+    (["eval", "--tasks", "goal_open_drawer", "--planners", "oracle", "--checkpoint", WORKCELL_CHECKPOINT],
+     "loaded by no planner of this run (oracle)"),
     (["frobnicate"], "valid commands"),
 ])
 def test_bad_input_exits_nonzero_and_names_valid_choices(args, fragment, tmp_path):

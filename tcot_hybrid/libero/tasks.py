@@ -110,8 +110,8 @@ def load_init_states(info: LiberoTaskInfo) -> np.ndarray:
 
 class LiberoTask(Task):
     """A LIBERO task run by this stack (see module docstring). ``set_episode`` picks the layout: ``shipped``
-    = init state number ``seed mod N`` (the paper's protocol), ``sampled`` = a fresh layout from the task
-    file's regions seeded by ``seed``."""
+    = init state number ``seed``, 0 <= seed < N (the paper's protocol; a seed past the shipped states is refused,
+    not wrapped onto one already run), ``sampled`` = a fresh layout from the task file's regions seeded by ``seed``."""
 
     world_kind = "libero"
     default_robot = ROBOT
@@ -174,14 +174,18 @@ class LiberoTask(Task):
     def set_episode(self, *, seed: int, init: str | None) -> None:
         super().set_episode(seed=seed, init=init)
         if self.init == "shipped":
-            self.init_states()  # a missing file is refused now, before anything is built
+            n = len(self.init_states())  # a missing file is refused now, before anything is built
+            if not 0 <= seed < n:
+                raise ConfigError(f"seed {seed} is not a shipped init state of LIBERO task {self.name!r}: it ships "
+                                  f"{n}, seeds 0-{n - 1} (the paper's protocol: --seed-start 0 --episodes {n}); "
+                                  f"use --init sampled for other layouts")
 
     def reset(self, world: World, rng: np.random.Generator) -> None:
         if self.scene is None:
             raise RuntimeError("LiberoTask.reset before build_scene")
         if self.init == "shipped":
             states = self.init_states()
-            self.scene.set_state(states[self.episode_seed % len(states)])
+            self.scene.set_state(states[self.episode_seed])  # in range: set_episode checked it
         else:
             self.scene.sample_layout(self.episode_seed)
         self.world = world  # the oracle's skills read it (privileged); rebuilt per episode

@@ -100,6 +100,13 @@ def check_planner_name(name: str) -> None:
 CHECKPOINT_KINDS = {"learned": "trajectory", "direct": "direct"}
 
 
+def check_checkpoint_used(checkpoint: str | Path | None, planners: list[str]) -> None:
+    """Refuse a ``--checkpoint`` no planner of the run loads (e.g. the oracle alone): it would be ignored."""
+    if checkpoint is not None and not any(p in CHECKPOINT_KINDS for p in planners):
+        raise ConfigError(f"checkpoint {str(checkpoint)!r} is loaded by no planner of this run "
+                          f"({', '.join(planners)}); the planners that load one: {', '.join(sorted(CHECKPOINT_KINDS))}")
+
+
 def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None, *, suite: str | None = None,
                        robot_ref: str | None = None) -> Path | None:
     """The checkpoint file planner ``name`` loads: ``checkpoint`` if given, else the robot's shipped default for

@@ -98,12 +98,12 @@ def test_libero_panda_pinocchio_matches_scene(libero_runner, rng):
 
 
 def test_shipped_init_state_and_goal_check(libero_runner):
-    """--init shipped loads state number seed mod N; the stack's verdict is LIBERO's own goal check."""
+    """--init shipped loads state number seed; the stack's verdict is LIBERO's own goal check."""
     task, sim = libero_runner.stack.task, libero_runner.stack.sim
     states = task.init_states()
     assert states.shape == (50, 1 + sim.model.nq + sim.model.nv)
-    task.set_episode(seed=53, init="shipped")
-    sim.reset(np.random.default_rng(53))
+    task.set_episode(seed=3, init="shipped")
+    sim.reset(np.random.default_rng(3))
     np.testing.assert_allclose(sim.data.qpos, states[3][1:1 + sim.model.nq])
     assert task.success(sim.world) == bool(task.scene.env._check_success()) is False
     # Put the goal's object on its target by hand: LIBERO's check and the stack's verdict agree it is done.

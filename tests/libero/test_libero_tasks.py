@@ -65,6 +65,24 @@ def test_bad_libero_names_and_init_states(tmp_path, capsys):
     task.set_episode(seed=0, init="sampled")  # a sampled layout needs no init states
 
 
+def test_a_seed_past_the_shipped_init_states_is_refused_not_wrapped(tmp_path, capsys):
+    """Seed 50 of a task with 50 shipped states would be state 0 again: an episode counted twice."""
+    pytest.importorskip("libero.libero")
+    task = make_task(suite_task_names("libero_goal")[0])
+    task.set_episode(seed=49, init="shipped")
+    assert task.episode_seed == 49
+    for seed in (50, -1):
+        with pytest.raises(ConfigError, match=rf"seed {seed} is not a shipped init state .* seeds 0-49"):
+            task.set_episode(seed=seed, init="shipped")
+    task.set_episode(seed=50, init="sampled")  # sampled layouts take any seed
+    # eval checks each cell's last seed before any episode runs: 49 + 2 episodes reach state 50
+    args = ["eval", "--tasks", task.name, "--init", "shipped", "--seed-start", "49", "--out", str(tmp_path / "e")]
+    assert main(args + ["--episodes", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "seed 50 is not a shipped init state" in err and "--init sampled" in err
+    assert not (tmp_path / "e" / "episodes.jsonl").exists()
+
+
 def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path, capsys):
     pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libero"
     cfg = tmp_path / "shipped.yaml"
