@@ -60,6 +60,9 @@ def main() -> None:
     unknown = set((a.variants or "").split(",")) - {name(v) for v in VARIANTS} - {""}
     if unknown:
         ap.error(f"unknown variants {sorted(unknown)}; choose from {', '.join(name(v) for v in VARIANTS)}")
+    if a.all_tasks and a.variants is not None:
+        ap.error(f"--all-tasks replays its own two variants ({name(SHIPPED)}, {name(COMMANDED_CORNERS)}); "
+                 "give --variants without it")
     if a.all_tasks:
         from dev_runs import S4
 
@@ -96,7 +99,7 @@ def replay_variants(data: Path, out: Path, variants, collect: list[str], workers
 
 
 def write_section_40() -> None:
-    from dev_runs import SUITES
+    from dev_runs import SUITES, per_suite
 
     from tcot_hybrid.markdown import update_readme_section
 
@@ -104,12 +107,9 @@ def write_section_40() -> None:
             if (OUT40 / f"{name(v)}.json").is_file()}
     rows = []
     for v, rep in reps.items():
-        cells = []
-        for suite in (*SUITES, None):
-            tasks = [t for t in rep["per_task"] if suite is None or t.startswith(suite + ":")]
-            cells.append(f"{sum(rep['per_task'][t]['successes'] for t in tasks)}/"
-                         f"{sum(rep['per_task'][t]['demos'] for t in tasks)}")
-        rows.append(f"| {v[0]} | {v[1]} | {v[2]} | {v[3]} | " + " | ".join(cells[:-1]) + f" | **{cells[-1]}** |")
+        eps = [{**d, "suite": d["task"].split(":")[0]} for d in rep["demos"]]
+        rows.append(f"| {v[0]} | {v[1]} | {v[2]} | {v[3]} | " + " | ".join(per_suite(eps))
+                    + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** |")
     diff = ""
     if len(reps) == 2:
         base, new = (reps[v]["per_task"] for v in (SHIPPED, COMMANDED_CORNERS))

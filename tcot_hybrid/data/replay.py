@@ -104,8 +104,8 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
     base = RunConfig()
     # init "sampled": `tcot collect` records only sampled layouts (on LIBERO the default, "shipped", would put the
     # demo's label on the shipped init state of the same number: another layout, and the test set)
-    cfg = RunConfig(task=info.task, seed=info.seed, init="sampled", robot=info.robot, controller=env["controller"],
-                    ik=env["ik"],
+    cfg = RunConfig(task=info.task, seed=info.seed, init="sampled", robot=info.robot,
+                    controller=env["controller"], ik=env["ik"],
                     timing=TimingConfig(sim_dt=env["sim_dt"], ctrl_dt=env["ctrl_dt"], plan_dt=env["plan_dt"]),
                     scene=replace(SceneConfig(), planner_camera=env["camera"], planner_image_px=int(env["width"])),
                     supervisor=replace(base.supervisor, mode="global"))
