@@ -87,6 +87,26 @@ def model_table(rows: list[dict], table_rows, suite: str) -> list[str]:
     return out
 
 
+def checkpoint_table(rows: list[dict], runs) -> list[str]:
+    """Successes / episodes per suite of each (run, mode, checkpoint label, command) in ``runs``, read from gathered
+    ``rows`` (each with its ``run``); each mode's first row is the baseline its won / lost counts against."""
+    by: dict = defaultdict(list)
+    for r in rows:
+        by[(r["run"], r["mode"])].append(r)
+    out = ["| checkpoint | mode | " + " | ".join(SUITES) + " | all four | won / lost |", "|" + "---|" * (len(SUITES) + 4)]
+    base: dict = {}
+    for name, mode, ck, _ in runs:
+        eps = by.get((name, mode))
+        if not eps:
+            continue
+        first = mode not in base
+        base.setdefault(mode, {(e["task"], e["seed"]): e["success"] for e in eps})
+        wl = "-" if first else won_lost(base[mode], eps)
+        out.append(f"| {ck} | {mode} | " + " | ".join(per_suite(eps))
+                   + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
+    return out
+
+
 def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) -> list[str]:
     """The docs section's closing list: each (run directory under runs/dev, command) that ``script --gather`` reads."""
     return (["", f"Commands (each with `--workers {workers} --out runs/dev/<run>`; `{script} --gather` reads them):", ""]

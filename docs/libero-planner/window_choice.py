@@ -8,7 +8,6 @@ never the shipped init states, never 90000+):
 from __future__ import annotations
 
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
@@ -36,23 +35,9 @@ def gather() -> None:
 
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    by: dict = defaultdict(list)
-    for r in rows:
-        by[(r["run"], r["mode"])].append(r)
-    out = ["Sampled development layouts 20000-20001, all 40 tasks (successes / episodes; won and lost against the "
-           "shipped checkpoint in the same mode on the same layouts):", "",
-           "| checkpoint | mode | " + " | ".join(SUITES) + " | all four | won / lost |", "|" + "---|" * (len(SUITES) + 4)]
-    base = {}
-    for name, mode, ck, _ in RUNS:
-        eps = by.get((name, mode))
-        if not eps:
-            continue
-        first = mode not in base  # the shipped checkpoint's run: the baseline of its mode
-        base.setdefault(mode, {(e["task"], e["seed"]): e["success"] for e in eps})
-        wl = "-" if first else dev_runs.won_lost(base[mode], eps)
-        out.append(f"| {ck} | {mode} | " + " | ".join(dev_runs.per_suite(eps))
-                   + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
-    return out + dev_runs.command_lines("window_choice.py", 2, dict((n, c) for n, _, _, c in RUNS).items())
+    return (["Sampled development layouts 20000-20001, all 40 tasks (successes / episodes; won and lost against the "
+             "shipped checkpoint in the same mode on the same layouts):", ""] + dev_runs.checkpoint_table(rows, RUNS)
+            + dev_runs.command_lines("window_choice.py", 2, dict((n, c) for n, _, _, c in RUNS).items()))
 
 
 if __name__ == "__main__":
