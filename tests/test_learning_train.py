@@ -113,10 +113,18 @@ def test_resumed_run_ends_with_the_weights_of_an_uninterrupted_one(demo_file, tm
     assert all(torch.equal(wa[k], wb[k]) for k in wa)  # same weights as the run that was never cut
     whole_recs = [json.loads(x) for x in (tmp_path / "whole.metrics.jsonl").read_text().splitlines()]
     assert [r["val"] for r in recs] == [r["val"] for r in whole_recs]
-    # a finished run is not trained again
+    # a finished run is not trained again, nor its checkpoint rewritten (its recorded training time stays)
     lines.clear()
+    written = out.stat().st_mtime_ns
     again = train(_cfg(demo_file, out, max_epochs=3), resume=True, log=lines.append, progress=False)
     assert any("nothing left to train" in x for x in lines) and again.epochs == 3 and run_finished(out)
+    assert out.stat().st_mtime_ns == written and not any("wrote" in x for x in lines) and again.metrics == res.metrics
+    # ... but a finished run whose checkpoint was deleted writes it again from the saved best weights
+    best = load_file(out)
+    out.unlink()
+    train(_cfg(demo_file, out, max_epochs=3), resume=True, **quiet)
+    rewritten = load_file(out)
+    assert rewritten.keys() == best.keys() and all(torch.equal(rewritten[k], best[k]) for k in best)
     assert len(out.with_suffix(".metrics.jsonl").read_text().splitlines()) == 3
     # the command line: --resume continues over an existing checkpoint without --overwrite
     assert cmd_train(["--data", str(demo_file), "--out", str(out), "--threads", "1", "--batch-size", "16",

@@ -133,6 +133,13 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     from tcot_hybrid.learning.vocab import Vocabulary
 
     t_start = time.perf_counter()
+    if resume and run_finished(cfg.out) and Path(cfg.out).is_file():
+        # checked before the data load; the checkpoint is left as it is, so its recorded training time stays true
+        st = load_resume_state(cfg, "+".join(file_hash(p) for p in [cfg.data, *cfg.extra_data, *cfg.online_data]))
+        log(f"resumed from {resume_path(cfg.out)}: that run had finished after epoch {st['epoch']} of "
+            f"{cfg.max_epochs} (best epoch {st['best_epoch']}); nothing left to train, {cfg.out} left as it is")
+        return TrainResult(checkpoint=Path(cfg.out), metrics=json.loads(st["best_metrics"]), epochs=int(st["epoch"]),
+                           wall_s=0.0)
     torch.set_num_threads(cfg.threads or 2)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
