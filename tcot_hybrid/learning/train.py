@@ -133,13 +133,17 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     from tcot_hybrid.learning.vocab import Vocabulary
 
     t_start = time.perf_counter()
-    if resume and run_finished(cfg.out) and Path(cfg.out).is_file():
-        # checked before the data load; the checkpoint is left as it is, so its recorded training time stays true
-        st = load_resume_state(cfg, "+".join(file_hash(p) for p in [cfg.data, *cfg.extra_data, *cfg.online_data]))
-        log(f"resumed from {resume_path(cfg.out)}: that run had finished after epoch {st['epoch']} of "
-            f"{cfg.max_epochs} (best epoch {st['best_epoch']}); nothing left to train, {cfg.out} left as it is")
-        return TrainResult(checkpoint=Path(cfg.out), metrics=json.loads(st["best_metrics"]), epochs=int(st["epoch"]),
-                           wall_s=0.0)
+    data_files = [cfg.data, *cfg.extra_data, *cfg.online_data]
+    state, data_hash = None, ""
+    if resume and all(Path(p).is_file() for p in data_files):  # a missing file is named by the data load below
+        data_hash = "+".join(file_hash(p) for p in data_files)
+        state = load_resume_state(cfg, data_hash)  # checked before the (minutes-long) data load
+    if state is not None and state["finished"] and Path(cfg.out).is_file():
+        # the checkpoint is left as it is, so its recorded training time stays true
+        log(f"resumed from {resume_path(cfg.out)}: that run had finished after epoch {state['epoch']} of "
+            f"{cfg.max_epochs} (best epoch {state['best_epoch']}); nothing left to train, {cfg.out} left as it is")
+        return TrainResult(checkpoint=Path(cfg.out), metrics=json.loads(state["best_metrics"]),
+                           epochs=int(state["epoch"]), wall_s=0.0)
     torch.set_num_threads(cfg.threads or 2)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
@@ -156,7 +160,6 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     of = f" (suites {', '.join(cfg.suites)})" if cfg.suites else ""
     log(f"data {cfg.data}{of}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
-    data_files = [cfg.data, *cfg.extra_data, *cfg.online_data]
     trs, vas = [tr], [va]
     for path in cfg.extra_data:
         _check_same_env(env, env_of(path)[0], path, cfg.data)
@@ -184,8 +187,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
             vas.append(on_va)
     tr, va = concat_frames(trs), concat_frames(vas)
     del trs, vas
-    data_hash = "+".join(file_hash(p) for p in data_files)
-    state = load_resume_state(cfg, data_hash) if resume else None
+    data_hash = data_hash or "+".join(file_hash(p) for p in data_files)
     if resume and state is None:
         log(f"--resume: no training state at {resume_path(cfg.out)}; starting afresh")
     model = PlannerNet(mcfg)
