@@ -183,7 +183,8 @@ class EpisodeRunner:
             if self.perturbation is not None:
                 image = self.perturbation.on_image(image)
         obs = Observation(step=step, image=image, depth_m=None, q=s.sim.q,
-                          gripper_closed=s.sim.gripper_closed_cmd(), instruction=s.task.instruction)
+                          gripper_closed=s.sim.gripper_closed_cmd(), instruction=s.task.instruction,
+                          tcp_pos_m=s.sim.tcp_pos())
         self._obs = (step, obs)
         return obs
 
@@ -380,6 +381,7 @@ class EpisodeRunner:
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
             "homes": self.supervisor.homes,
+            "camera_calibration": s.planner.calibration.summary() if hasattr(s.planner, "calibration") else None,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),
             "max_velocity_ratio": float(ex.max_velocity_ratio),

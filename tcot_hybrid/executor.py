@@ -243,7 +243,7 @@ class MotionExecutor:
     def set_plan(self, plan: WaypointPlan) -> bool:
         """Lift and adopt a plan; a plan that cannot be lifted is rejected and the old one kept."""
         try:
-            points = lift_waypoints(plan.uv_px, plan.depth_m, self.camera, config=self.lift_config)
+            points = lift_waypoints(plan.uv_px, plan.depth_m, plan.lift_camera(self.camera), config=self.lift_config)
         except LiftError as exc:
             self.event("plan_rejected", reason=str(exc), plan_kind=plan.kind, step=plan.step)
             return False

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.errors import PlanningError
 
 PLAN_KINDS = ("global", "local", "direct")
@@ -25,6 +26,9 @@ class WaypointPlan:
     camera:         name of the planner camera the pixels live in
     kind:           "global" (whole task), "local" (short horizon) or "direct" (one-step action)
     step:           planner step at which the plan was made
+    calibration:    the planner camera model the pixels and depths are lifted with when it is not the
+                    stack's nominal one (a pose re-estimated during the episode: :mod:`tcot_hybrid.calibration`);
+                    None = the nominal calibration
     tcp_rot:        optional (N, 3, 3) TCP orientation per waypoint in the world frame (columns: the TCP's
                     x, y = finger closing axis, z = approach axis). None = top-down with the fingers closing
                     along world y (``robot.R_DOWN``), all the workcell's skills need. LIBERO's skills grasp
@@ -38,6 +42,7 @@ class WaypointPlan:
     kind: str
     step: int = 0
     tcp_rot: np.ndarray | None = None
+    calibration: CameraModel | None = field(default=None, compare=False)
     meta: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -86,10 +91,17 @@ class WaypointPlan:
             object.__setattr__(self, "tcp_rot", rot)
         if self.kind not in PLAN_KINDS:
             raise PlanningError(f"plan kind {self.kind!r} is not one of {', '.join(PLAN_KINDS)}")
+        if self.calibration is not None and self.calibration.name != self.camera:
+            raise PlanningError(f"plan calibration is of camera {self.calibration.name!r}, but its pixels live in "
+                                f"camera {self.camera!r}")
         for name, arr in (("uv_px", uv), ("depth_m", depth), ("gripper_closed", grip.astype(bool))):
             arr = np.array(arr)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+
+    def lift_camera(self, nominal: CameraModel) -> CameraModel:
+        """The camera model this plan's pixels and depths are lifted with: its own calibration, else ``nominal``."""
+        return nominal if self.calibration is None else self.calibration
 
     def __len__(self) -> int:
         return int(self.uv_px.shape[0])

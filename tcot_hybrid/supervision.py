@@ -325,7 +325,7 @@ class Supervisor:
         t0 = time.perf_counter()
         try:
             plan = self.planner.plan(obs, mode="local")
-            pts = executor.camera.unproject(plan.uv_px, plan.depth_m)
+            pts = plan.lift_camera(executor.camera).unproject(plan.uv_px, plan.depth_m)
         except (PlanningError, LiftError):
             return None, 0.0
         budget = self.cfg.max_plan_latency_s

@@ -21,6 +21,9 @@ class Observation:
     q:       arm joint positions [rad]
     gripper_closed: current gripper command
     instruction: the task's natural-language instruction
+    tcp_pos_m: the TCP's world position from the measured joints (forward kinematics) [m], or None; the
+             learned planner checks its camera's calibration against where it sees the hand
+             (:mod:`tcot_hybrid.calibration`)
     """
 
     step: int
@@ -29,6 +32,7 @@ class Observation:
     q: np.ndarray
     gripper_closed: bool
     instruction: str
+    tcp_pos_m: np.ndarray | None = None
 
 
 class Planner(ABC):

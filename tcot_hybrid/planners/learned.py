@@ -20,11 +20,12 @@ raise :class:`PlanningError` (nothing is clipped or guessed).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from tcot_hybrid.calibration import CameraSelfCalibration, SelfCalibrationConfig
 from tcot_hybrid.camera import CameraModel, depth_at_height
 from tcot_hybrid.config import require_choice
 from tcot_hybrid.data.labels import GLOBAL_SPACINGS
@@ -73,6 +74,9 @@ class LearnedPlannerConfig:
                       (docs/libero-planner.md, "How deep a side grasp goes"). Needs the rotation head (LIBERO
                       checkpoints; workcell plans are top-down); 0 = off. Up: firmer hold on handles, the fingers
                       nearer what stands behind the handle.
+    self_calibration: re-estimating the planner camera's pose from where the network sees the hand, once it
+                      disagrees with the nominal calibration (a camera knocked after calibration):
+                      :class:`tcot_hybrid.calibration.SelfCalibrationConfig`.
     """
 
     switch_window: int = 2
@@ -81,6 +85,7 @@ class LearnedPlannerConfig:
     dwell_step_m: float = 0.01
     min_height_m: float = -0.02
     side_grasp_depth_m: float = 0.012
+    self_calibration: SelfCalibrationConfig = field(default_factory=SelfCalibrationConfig)
 
     def __post_init__(self) -> None:
         from tcot_hybrid.config import require_finite, require_int, require_nonnegative, require_positive
@@ -146,11 +151,12 @@ def align_switches_to_dwells(points: np.ndarray, closed: np.ndarray, *, window: 
 
 def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed: np.ndarray, *, kind: str,
                 step: int, config: LearnedPlannerConfig, global_spacing: str, meta: dict | None = None,
-                tcp_rot: np.ndarray | None = None) -> WaypointPlan:
+                tcp_rot: np.ndarray | None = None, refined: bool = False) -> WaypointPlan:
     """The plan for waypoints given as pixel + TCP height + gripper bit (the learned planner's output form):
     ``depth_m`` where each pixel's ray meets z = z_m; gripper switches aligned to the bottom of their descent
     and, in time-spaced global plans (``global_spacing`` of the windows the points follow), to where the arm
-    dwells."""
+    dwells. ``refined``: ``camera`` is a re-estimated calibration the plan must be lifted with
+    (:mod:`tcot_hybrid.calibration`)."""
     require_choice("global_spacing", global_spacing, GLOBAL_SPACINGS)
     try:
         depth = depth_at_height(camera, uv_px, z_m)
@@ -167,7 +173,7 @@ def height_plan(camera: CameraModel, uv_px: np.ndarray, z_m: np.ndarray, closed:
         points = deepen_side_grasps(camera.unproject(uv_px, depth), closed, tcp_rot, config.side_grasp_depth_m)
         uv_px, depth = camera.project(points)
     return WaypointPlan(uv_px=uv_px, depth_m=depth, gripper_closed=closed, camera=camera.name, kind=kind,
-                        step=step, tcp_rot=tcp_rot, meta=meta or {})
+                        step=step, tcp_rot=tcp_rot, meta=meta or {}, calibration=camera if refined else None)
 
 
 def deepen_side_grasps(points: np.ndarray, closed: np.ndarray, tcp_rot: np.ndarray, depth_m: float) -> np.ndarray:
@@ -366,9 +372,10 @@ class LearnedPlanner(NetworkPlanner):
                                 f"{self.cfg.n_local} local waypoints)")
         from tcot_hybrid.learning.data import height_reference
 
-        self.z_ref = height_reference(camera, self.meta.get("height_ref", "world"))  # [m] world z of height 0
-        self.R_world_cam = np.asarray(camera.T_world_cam, dtype=float)[:3, :3]
+        self.height_ref = self.meta.get("height_ref", "world")
+        height_reference(camera, self.height_ref)  # an unknown height_ref is refused here, not at the first plan
         self.min_z_m, self.floor_note = lowest_plan_height(self.meta, camera, config.min_height_m)
+        self.calibration = CameraSelfCalibration(camera, config.self_calibration, height_ref=self.height_ref)
 
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
@@ -383,22 +390,33 @@ class LearnedPlanner(NetworkPlanner):
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         if mode not in MODES:
             raise PlanningError(f"learned planner mode {mode!r} is not one of {', '.join(MODES)}")
+        from tcot_hybrid.learning.data import height_reference
+
         ng = self.cfg.n_global
         sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, self.cfg.n_waypoints)
         if self.cfg.head == "heatmap":  # only the executed waypoints' maps are computed
             out, sl = self.infer(obs, mode, waypoints=sl), slice(None)
         else:
             out = self.infer(obs, mode)
-        uv, z = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float) + self.z_ref
+        uv, height = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float)
+        camera = self.camera_for(obs, uv[0], height[0])  # both windows' first point is the hand now
+        z = height + height_reference(camera, self.height_ref)
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
-        check_outputs(uv, z, prob, min_height_m=self.min_z_m, floor_note=self.floor_note)
-        tcp_rot = self.orientations(out["rot6"][sl]) if "rot6" in out else None
-        return height_plan(self.camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
+        check_outputs(uv, z, prob, min_height_m=self.min_z_m, floor_note=self.floor_note)  # a world floor
+        tcp_rot = self.orientations(out["rot6"][sl], camera) if "rot6" in out else None
+        return height_plan(camera, uv, z, prob > 0.5, kind=mode, step=obs.step, config=self.config,
                            global_spacing=self.windows.global_spacing, meta={"z_m": z, "gripper_prob": prob},
-                           tcp_rot=tcp_rot)
+                           tcp_rot=tcp_rot, refined=camera is not self.camera)
 
-    def orientations(self, rot6: np.ndarray) -> np.ndarray:
+    def camera_for(self, obs: Observation, hand_uv_px: np.ndarray, hand_height_m: float) -> CameraModel:
+        """The calibration to lift this plan with: the nominal one, or re-estimated from the network's sightings of
+        the hand so far against the TCP's measured position (``obs.tcp_pos_m``; None: the nominal one)."""
+        if obs.tcp_pos_m is None or not (np.all(np.isfinite(hand_uv_px)) and np.isfinite(hand_height_m)):
+            return self.calibration.camera  # a non-finite output is refused by check_outputs, not taken as a sighting
+        return self.calibration.add(obs.step, hand_uv_px, hand_height_m, obs.tcp_pos_m)
+
+    def orientations(self, rot6: np.ndarray, camera: CameraModel | None = None) -> np.ndarray:
         """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs, each turned 180
         degrees about its approach axis when that brings the hand's yaw into the oracle's range (the network is
         trained up to that parallel-jaw symmetry; :func:`canonical_hand`)."""
@@ -408,7 +426,8 @@ class LearnedPlanner(NetworkPlanner):
             R_cam = rot6_to_matrix(rot6)
         except ValueError as exc:
             raise PlanningError(f"planner orientation output cannot be made a rotation: {exc}") from exc
-        return canonical_hand(self.R_world_cam @ R_cam)
+        R_world_cam = np.asarray((camera or self.camera).T_world_cam, dtype=float)[:3, :3]
+        return canonical_hand(R_world_cam @ R_cam)
 
     def success_probability(self, obs: Observation) -> float:
         """p(task succeeded) from the detect prompt (paper eq. 7), in [0, 1]."""

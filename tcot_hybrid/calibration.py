@@ -1,0 +1,156 @@
+"""Online refinement of the planner camera's pose from where the planner sees the hand.
+
+Every learned plan starts at the hand: the first waypoint of a global window's future (k = 0) and of a local
+window is the TCP now, a pixel and a height the network reads off the image. The TCP's true position is known
+from the measured joints (forward kinematics), so each plan gives a 2D-3D correspondence. With the nominal
+calibration those agree to 1-2 px; a camera knocked by a few centimetres and degrees after calibration
+(LIBERO-Plus's camera shift, the ``camera_shift`` perturbation) puts them 6-10 px apart, and every lifted
+waypoint then lands centimetres off.
+
+:class:`CameraSelfCalibration` gathers the correspondences of an episode and, once the nominal camera's median
+reprojection error exceeds ``trigger_px`` (a camera that has moved, not network noise), solves for the camera
+pose that best explains them: a robust (soft-L1) least-squares fit of the pose correction (a rotation vector and
+a shift in the camera frame) with a Gaussian prior on its size, the pixel and height residuals weighted by the
+network's measured noise (scipy's ``least_squares``). Below the trigger the nominal camera is returned
+unchanged, so undisturbed episodes run exactly as without it.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from tcot_hybrid.camera import CameraModel
+from tcot_hybrid.config import require_int, require_positive
+from tcot_hybrid.errors import PlanningError
+
+
+@dataclass(frozen=True, kw_only=True)
+class SelfCalibrationConfig:
+    """When and how far the planner camera's pose is re-estimated during an episode.
+
+    enabled:        refine the camera from the planner's own hand sightings (False: the nominal calibration
+                    always, as before).
+    trigger_px:     refine only once the median distance between where the planner sees the hand and where the
+                    nominal camera projects it exceeds this [px]. Measured on development layouts: 1-2 px with
+                    the nominal camera, 6-10 px under a 3 cm / 3 deg shift. Down: reacts to smaller shifts,
+                    and sooner to network noise.
+    pixel_sigma_px: the network's noise on the hand's pixel [px], the weight of a pixel residual.
+    height_sigma_m: the network's noise on the hand's height below the camera [m], the weight of a height
+                    residual (its heights are measured from the camera's height: a camera moved up reads every
+                    height higher).
+    prior_turn_deg, prior_shift_m: 1-sigma sizes of the pose correction the fit is drawn towards zero with
+                    [deg, m]: how far a fixed camera is believed to be knocked. Up: trusts the sightings more.
+    max_points:     sightings kept (the newest); one per planner step at most.
+    """
+
+    enabled: bool = True
+    trigger_px: float = 4.0
+    pixel_sigma_px: float = 2.0
+    height_sigma_m: float = 0.01
+    prior_turn_deg: float = 5.0
+    prior_shift_m: float = 0.05
+    max_points: int = 40
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            from tcot_hybrid.errors import ConfigError
+
+            raise ConfigError(f"self_calibration.enabled must be true or false, got {self.enabled!r}")
+        for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m"):
+            require_positive(f"self_calibration.{name}", getattr(self, name))
+        require_int("self_calibration.max_points", self.max_points, minimum=1)
+
+
+def corrected_camera(nominal: CameraModel, correction: np.ndarray) -> CameraModel:
+    """``nominal`` with its pose corrected by ``correction`` = (rotation vector [rad], shift [m]), both in the
+    nominal camera's frame: T_world_cam = T_nominal @ [R(rotvec) | shift]."""
+    c = np.asarray(correction, dtype=float)
+    delta = np.eye(4)
+    delta[:3, :3] = Rotation.from_rotvec(c[:3]).as_matrix()
+    delta[:3, 3] = c[3:]
+    return dataclasses.replace(nominal, T_world_cam=np.asarray(nominal.T_world_cam, float) @ delta)
+
+
+class CameraSelfCalibration:
+    """One episode's camera estimate (see the module docstring). ``height_ref`` is what the planner's heights are
+    measured from: "camera" (its height) or "world" (z = 0; then height residuals say nothing of the camera)."""
+
+    def __init__(self, nominal: CameraModel, config: SelfCalibrationConfig, *, height_ref: str):
+        self.nominal, self.config, self.height_ref = nominal, config, height_ref
+        self.camera = nominal
+        self.correction = np.zeros(6)
+        self._steps: list[int] = []
+        self._uv: list[np.ndarray] = []
+        self._height: list[float] = []
+        self._tcp: list[np.ndarray] = []
+
+    @property
+    def n_points(self) -> int:
+        return len(self._steps)
+
+    def nominal_error_px(self) -> float:
+        """Median pixel distance between the sightings and the nominal camera's projection of the TCP [px]."""
+        if not self._steps:
+            return 0.0
+        uv, _ = self.nominal.project(np.array(self._tcp))
+        return float(np.median(np.linalg.norm(uv - np.array(self._uv), axis=1)))
+
+    def add(self, step: int, uv_px: np.ndarray, height_m: float, tcp_world: np.ndarray) -> CameraModel:
+        """Record the planner's sighting of the hand at ``step`` (pixel, height relative to ``height_ref``) and the
+        TCP's measured world position; return the camera to lift this step's plan with."""
+        uv = np.asarray(uv_px, dtype=float).reshape(2)
+        tcp = np.asarray(tcp_world, dtype=float).reshape(3)
+        if not (np.all(np.isfinite(uv)) and np.isfinite(height_m) and np.all(np.isfinite(tcp))):
+            raise PlanningError(f"camera self-calibration at step {step}: non-finite sighting uv = {uv.tolist()}, "
+                                f"height = {height_m}, TCP = {tcp.tolist()}")
+        if not self.config.enabled:
+            return self.camera
+        if self._steps and self._steps[-1] == step:  # a second plan at the same step sees the same image
+            return self.camera
+        self._steps.append(step)
+        self._uv.append(uv)
+        self._height.append(float(height_m))
+        self._tcp.append(tcp)
+        keep = self.config.max_points
+        if len(self._steps) > keep:
+            for lst in (self._steps, self._uv, self._height, self._tcp):
+                del lst[:-keep]
+        if self.camera is self.nominal and self.nominal_error_px() <= self.config.trigger_px:
+            return self.camera
+        self._fit()
+        return self.camera
+
+    def _fit(self) -> None:
+        cfg = self.config
+        uv, tcp, height = np.array(self._uv), np.array(self._tcp), np.array(self._height)
+        prior = np.r_[np.full(3, np.deg2rad(cfg.prior_turn_deg)), np.full(3, cfg.prior_shift_m)]
+
+        def residuals(c):
+            cam = corrected_camera(self.nominal, c)
+            proj, _ = cam.project(tcp)
+            r = [((proj - uv) / cfg.pixel_sigma_px).ravel()]
+            if self.height_ref == "camera":  # predicted TCP z = height + the camera's z
+                r.append((height + cam.T_world_cam[2, 3] - tcp[:, 2]) / cfg.height_sigma_m)
+            return np.concatenate(r)
+
+        def objective(c):
+            return np.concatenate([residuals(c), c / prior])
+
+        # soft-L1 on the sightings only would need a split loss; scipy applies one loss to all residuals, and
+        # the prior terms stay well inside its quadratic zone (|c / prior| ~ 1) for the corrections expected
+        fit = least_squares(objective, self.correction, loss="soft_l1", f_scale=2.0, x_scale=prior)
+        if fit.success and np.all(np.isfinite(fit.x)):
+            self.correction = fit.x
+            self.camera = corrected_camera(self.nominal, fit.x)
+
+    def summary(self) -> dict:
+        """What the episode record keeps: sightings, the nominal camera's error, the correction applied."""
+        turn = Rotation.from_rotvec(self.correction[:3])
+        return {"points": self.n_points, "nominal_error_px": round(self.nominal_error_px(), 2),
+                "refined": self.camera is not self.nominal,
+                "turn_deg": round(float(np.rad2deg(turn.magnitude())), 3),
+                "shift_m": np.round(self.correction[3:], 4).tolist()}
