@@ -129,12 +129,17 @@ class CameraSelfCalibration:
         uv, tcp, height = np.array(self._uv), np.array(self._tcp), np.array(self._height)
         prior = np.r_[np.full(3, np.deg2rad(cfg.prior_turn_deg)), np.full(3, cfg.prior_shift_m)]
 
-        def residuals(c):
-            cam = corrected_camera(self.nominal, c)
-            proj, _ = cam.project(tcp)
+        T_nominal, K = np.asarray(self.nominal.T_world_cam, float), self.nominal.K
+
+        def residuals(c):  # the projection of CameraModel.project, without building a camera per evaluation
+            T = T_nominal.copy()
+            T[:3, :3] = T_nominal[:3, :3] @ Rotation.from_rotvec(c[:3]).as_matrix()
+            T[:3, 3] = T_nominal[:3, :3] @ c[3:] + T_nominal[:3, 3]
+            pc = (tcp - T[:3, 3]) @ T[:3, :3]  # world -> camera: R^T (p - t)
+            proj = pc[:, :2] / pc[:, 2:3] @ K[:2, :2].T + K[:2, 2]
             r = [((proj - uv) / cfg.pixel_sigma_px).ravel()]
             if self.height_ref == "camera":  # predicted TCP z = height + the camera's z
-                r.append((height + cam.T_world_cam[2, 3] - tcp[:, 2]) / cfg.height_sigma_m)
+                r.append((height + T[2, 3] - tcp[:, 2]) / cfg.height_sigma_m)
             return np.concatenate(r)
 
         def objective(c):

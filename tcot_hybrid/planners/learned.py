@@ -372,6 +372,7 @@ class LearnedPlanner(NetworkPlanner):
                                 f"{self.cfg.n_local} local waypoints)")
         from tcot_hybrid.learning.data import height_reference
 
+        self.height_reference = height_reference  # imported here, not at the first plan: inside its latency budget
         self.height_ref = self.meta.get("height_ref", "world")
         height_reference(camera, self.height_ref)  # an unknown height_ref is refused here, not at the first plan
         self.min_z_m, self.floor_note = lowest_plan_height(self.meta, camera, config.min_height_m)
@@ -390,8 +391,6 @@ class LearnedPlanner(NetworkPlanner):
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         if mode not in MODES:
             raise PlanningError(f"learned planner mode {mode!r} is not one of {', '.join(MODES)}")
-        from tcot_hybrid.learning.data import height_reference
-
         ng = self.cfg.n_global
         sl = slice(self.windows.global_center, ng) if mode == "global" else slice(ng, self.cfg.n_waypoints)
         if self.cfg.head == "heatmap":  # only the executed waypoints' maps are computed
@@ -400,7 +399,7 @@ class LearnedPlanner(NetworkPlanner):
             out = self.infer(obs, mode)
         uv, height = out["uv_px"][sl].astype(float), out["z_m"][sl].astype(float)
         camera = self.camera_for(obs, uv[0], height[0])  # both windows' first point is the hand now
-        z = height + height_reference(camera, self.height_ref)
+        z = height + self.height_reference(camera, self.height_ref)
         with np.errstate(over="ignore"):
             prob = 1.0 / (1.0 + np.exp(-out["grip_logit"][sl].astype(float)))
         check_outputs(uv, z, prob, min_height_m=self.min_z_m, floor_note=self.floor_note)  # a world floor

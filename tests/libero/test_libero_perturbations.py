@@ -58,3 +58,29 @@ def test_object_moved_translates_a_libero_object_and_keeps_it_upright():
     assert np.linalg.norm(moved[:2]) == pytest.approx(0.10, abs=0.02)
     assert abs(moved[2]) < 0.005  # still standing on the table, not lying on its side
     assert float(np.trace(rot_before.T @ world.rot("ketchup_1"))) > 2.97  # same orientation (within ~8 degrees)
+
+
+def test_camera_shift_first_learned_plan_is_lifted_with_a_camera_nearer_the_moved_one():
+    """The planner camera is knocked before the first plan; the learned planner sees the hand where the moved
+    camera puts it and lifts its global plan with a re-estimated pose, nearer the moved camera than the nominal."""
+    from tcot_hybrid.camera import CameraModel
+
+    cfg = RunConfig(task=BOWL, seed=20000, init="sampled", planner="learned",
+                    perturb=PerturbConfig(name="camera_shift"))
+    runner = EpisodeRunner(cfg)
+    runner.settle()
+    runner.stack.planner.prepare()
+    runner._step_once(0, may_plan=True)
+    plan, nominal = runner.plans[0], runner.stack.camera
+    assert plan.calibration is not None and plan.lift_camera(nominal) is plan.calibration
+    sim = runner.stack.sim
+    moved = CameraModel.from_mujoco(sim.model, sim.data, cfg.scene.planner_camera, width=nominal.width,
+                                    height=nominal.height)
+    table = sim.tcp_pos() + np.c_[np.linspace(-0.15, 0.15, 7), np.linspace(0.1, -0.1, 7), np.full(7, -0.15)]
+    seen, _ = moved.project(table)
+
+    def error_px(cam):
+        return float(np.median(np.linalg.norm(cam.project(table)[0] - seen, axis=1)))
+
+    assert error_px(plan.calibration) < 0.5 * error_px(nominal)
+    assert runner.record(0.0)["camera_calibration"]["refined"] is True
