@@ -45,6 +45,11 @@ class SelfCalibrationConfig:
     prior_turn_deg, prior_shift_m: 1-sigma sizes of the pose correction the fit is drawn towards zero with
                     [deg, m]: how far a fixed camera is believed to be knocked. Up: trusts the sightings more.
     max_points:     sightings kept (the newest); one per planner step at most.
+    consistent_px, max_turn_deg, max_shift_m: a fitted pose is taken only when it explains the sightings (their
+                    median distance from its projection of the TCP at most ``consistent_px`` [px]) with a correction
+                    no larger than ``max_turn_deg`` [deg] and ``max_shift_m`` [m]; otherwise the disagreement is not
+                    a knocked camera (a hand hidden inside a cabinet or a microwave, read wrongly by the network, was
+                    seen on development layouts) and the camera stays as it was. Up: accepts more fits.
     """
 
     enabled: bool = True
@@ -54,13 +59,17 @@ class SelfCalibrationConfig:
     prior_turn_deg: float = 5.0
     prior_shift_m: float = 0.05
     max_points: int = 40
+    consistent_px: float = 3.0
+    max_turn_deg: float = 10.0
+    max_shift_m: float = 0.10
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
             from tcot_hybrid.errors import ConfigError
 
             raise ConfigError(f"self_calibration.enabled must be true or false, got {self.enabled!r}")
-        for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m"):
+        for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m",
+                     "consistent_px", "max_turn_deg", "max_shift_m"):
             require_positive(f"self_calibration.{name}", getattr(self, name))
         require_int("self_calibration.max_points", self.max_points, minimum=1)
 
@@ -83,6 +92,8 @@ class CameraSelfCalibration:
         self.nominal, self.config, self.height_ref = nominal, config, height_ref
         self.camera = nominal
         self.correction = np.zeros(6)
+        self.rejected_fits = 0  # fits that did not explain the sightings, or needed too large a correction
+        self.fit_error_px: float | None = None  # the taken fit's median pixel residual
         self._steps: list[int] = []
         self._uv: list[np.ndarray] = []
         self._height: list[float] = []
@@ -92,12 +103,15 @@ class CameraSelfCalibration:
     def n_points(self) -> int:
         return len(self._steps)
 
-    def nominal_error_px(self) -> float:
-        """Median pixel distance between the sightings and the nominal camera's projection of the TCP [px]."""
+    def error_px(self, camera: CameraModel) -> float:
+        """Median pixel distance between the sightings and ``camera``'s projection of the TCP [px]."""
         if not self._steps:
             return 0.0
-        uv, _ = self.nominal.project(np.array(self._tcp))
+        uv, _ = camera.project(np.array(self._tcp))
         return float(np.median(np.linalg.norm(uv - np.array(self._uv), axis=1)))
+
+    def nominal_error_px(self) -> float:
+        return self.error_px(self.nominal)
 
     def add(self, step: int, uv_px: np.ndarray, height_m: float, tcp_world: np.ndarray) -> CameraModel:
         """Record the planner's sighting of the hand at ``step`` (pixel, height relative to ``height_ref``) and the
@@ -148,14 +162,22 @@ class CameraSelfCalibration:
         # soft-L1 on the sightings only would need a split loss; scipy applies one loss to all residuals, and
         # the prior terms stay well inside its quadratic zone (|c / prior| ~ 1) for the corrections expected
         fit = least_squares(objective, self.correction, loss="soft_l1", f_scale=2.0, x_scale=prior)
-        if fit.success and np.all(np.isfinite(fit.x)):
-            self.correction = fit.x
-            self.camera = corrected_camera(self.nominal, fit.x)
+        if not (fit.success and np.all(np.isfinite(fit.x))):
+            self.rejected_fits += 1
+            return
+        camera = corrected_camera(self.nominal, fit.x)
+        error = self.error_px(camera)
+        turn = np.rad2deg(np.linalg.norm(fit.x[:3]))
+        if error > cfg.consistent_px or turn > cfg.max_turn_deg or np.linalg.norm(fit.x[3:]) > cfg.max_shift_m:
+            self.rejected_fits += 1
+            return
+        self.correction, self.camera, self.fit_error_px = fit.x, camera, error
 
     def summary(self) -> dict:
         """What the episode record keeps: sightings, the nominal camera's error, the correction applied."""
         turn = Rotation.from_rotvec(self.correction[:3])
         return {"points": self.n_points, "nominal_error_px": round(self.nominal_error_px(), 2),
-                "refined": self.camera is not self.nominal,
+                "refined": self.camera is not self.nominal, "rejected_fits": self.rejected_fits,
+                "fit_error_px": None if self.fit_error_px is None else round(self.fit_error_px, 2),
                 "turn_deg": round(float(np.rad2deg(turn.magnitude())), 3),
                 "shift_m": np.round(self.correction[3:], 4).tolist()}

@@ -106,3 +106,17 @@ def test_a_plan_carries_its_calibration_to_the_lift():
     with pytest.raises(PlanningError, match="calibration is of camera 'agentview'.*camera 'frontview'"):
         WaypointPlan(uv_px=[[60.0, 70.0]], depth_m=[1.0], gripper_closed=[False], camera="frontview", kind="local",
                      calibration=moved)
+
+
+def test_sightings_no_camera_pose_explains_are_not_taken_for_a_knock():
+    """A hand the network cannot see (inside a cabinet) gives pixels scattered far from the TCP's projection: the
+    trigger fires, but no small pose change explains them, so the camera stays the nominal one."""
+    rng = np.random.default_rng(4)
+    tcp = _hand_path(12, rng)
+    uv, height = _sightings(NOMINAL, tcp, rng)
+    uv += rng.normal(0.0, 15.0, uv.shape)
+    cal = CameraSelfCalibration(NOMINAL, SelfCalibrationConfig(), height_ref="camera")
+    for i in range(len(tcp)):
+        cam = cal.add(i, uv[i], height[i], tcp[i])
+    assert cal.nominal_error_px() > 4.0 and cal.rejected_fits > 0
+    assert cam is NOMINAL and cal.summary()["refined"] is False and cal.summary()["fit_error_px"] is None
