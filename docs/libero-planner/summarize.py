@@ -259,7 +259,9 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint", "eval-perturb-v3"),
+PERTURBS = (("shipped checkpoint, the planner camera's pose re-fitted from the hand (\"A knocked camera\")",
+             "eval-perturb-v4"),
+            ("shipped checkpoint, before camera self-calibration", "eval-perturb-v3"),
             ("shipped checkpoint; object_moved and target_moved laid LIBERO's bottles and boxes on their side then "
              "(docs/reliability.md, \"Findings and fixes\")", "eval-perturb-v2"),
             ("2000-demo checkpoint, the same perturbation code as the line above", "eval-perturb"))  # newest first
