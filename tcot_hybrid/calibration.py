@@ -11,8 +11,9 @@ waypoint then lands centimetres off.
 reprojection error exceeds ``trigger_px`` (a camera that has moved, not network noise), solves for the camera
 pose that best explains them: a robust (soft-L1) least-squares fit of the pose correction (a rotation vector and
 a shift in the camera frame) with a Gaussian prior on its size, the pixel and height residuals weighted by the
-network's measured noise (scipy's ``least_squares``). Below the trigger the nominal camera is returned
-unchanged, so undisturbed episodes run exactly as without it.
+network's measured noise (scipy's ``least_squares``). A fit is taken only when it explains the sightings with a
+plausible correction; a hand the network cannot see (inside a cabinet) gives sightings no pose explains. Below the
+trigger the nominal camera is returned unchanged, so undisturbed episodes run exactly as without it.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.config import require_int, require_positive
-from tcot_hybrid.errors import PlanningError
+from tcot_hybrid.errors import ConfigError, PlanningError
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -65,8 +66,6 @@ class SelfCalibrationConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
-            from tcot_hybrid.errors import ConfigError
-
             raise ConfigError(f"self_calibration.enabled must be true or false, got {self.enabled!r}")
         for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m",
                      "consistent_px", "max_turn_deg", "max_shift_m"):
