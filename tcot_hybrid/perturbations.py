@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from tcot_hybrid.config import require_int, require_nonnegative
-from tcot_hybrid.errors import ConfigError, unknown_name
+from tcot_hybrid.errors import ConfigError, PlanningError, unknown_name
 
 WORKSPACE = (0.33, 0.62, -0.27, 0.27)  # xmin, xmax, ymin, ymax [m] where moved objects may land
 FAR_ZONE = (0.74, 0.86, -0.15, 0.15)  # ... and, for objects out of reach (tool task), where they stay
@@ -96,8 +96,15 @@ class Perturbation(ABC):
 
 
 def _first_open_skill(runner):
+    """The task's first skill not yet done, which the object and target perturbations act on; None when all are
+    done, or when the task's skills cannot be derived from the scene as it stands (a LIBERO book lying where no
+    grasp fits the open hand: the oracle refuses it): the perturbation waits, the episode goes on."""
     world = runner.stack.sim.world
-    for skill in runner.stack.task.skills():
+    try:
+        skills = runner.stack.task.skills()
+    except PlanningError:
+        return None
+    for skill in skills:
         if not skill.done(world):
             return skill
     return None

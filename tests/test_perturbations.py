@@ -111,3 +111,19 @@ def test_run_summary_says_when_a_perturbation_did_not_fire(tmp_path, capsys):
                      "--perturb.at-step", "100000", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "perturbation arm_push did NOT fire: at_step 100000" in out and "not a perturbed one" in out
+
+
+def test_a_scene_the_oracle_cannot_describe_makes_object_perturbations_wait_not_crash(monkeypatch):
+    """target_moved/object_moved watch the task's skills; a scene they cannot be derived from (a LIBERO book lying
+    where no grasp fits) used to crash the episode with the oracle's PlanningError. Now the perturbation waits."""
+    from tcot_hybrid.errors import PlanningError
+
+    for name in ("object_moved", "target_moved"):
+        cfg = RunConfig(task="goal_cube_on_plate", seed=4, perturb=PerturbConfig(name=name))
+        runner = EpisodeRunner(cfg)
+
+        def no_skills():
+            raise PlanningError("oracle: no grasp for 'black_book_1'")
+
+        monkeypatch.setattr(runner.stack.task, "skills", no_skills)
+        assert runner.perturbation.fire(runner, 0) is None
