@@ -46,6 +46,11 @@ class SelfCalibrationConfig:
     prior_turn_deg, prior_shift_m: 1-sigma sizes of the pose correction the fit is drawn towards zero with
                     [deg, m]: how far a fixed camera is believed to be knocked. Up: trusts the sightings more.
     max_points:     sightings kept (the newest); one per planner step at most.
+    min_points, home_tol_rad: a fit needs ``min_points`` sightings, unless one of them was taken with the arm at
+                    its home posture (every joint within ``home_tol_rad`` [rad]), where every demonstration starts and
+                    the network reads the hand best. Elsewhere one sighting cannot tell a knocked camera from a hand
+                    read wrongly: an arm started 0.2 rad off its posture (``init_posture``) was read 5-9 px off, and a
+                    one-sighting fit on it sent every plan astray. Up: waits for more evidence.
     consistent_px, max_turn_deg, max_shift_m: a fitted pose is taken only when it explains the sightings (their
                     median distance from its projection of the TCP at most ``consistent_px`` [px]) with a correction
                     no larger than ``max_turn_deg`` [deg] and ``max_shift_m`` [m]; otherwise the disagreement is not
@@ -60,6 +65,8 @@ class SelfCalibrationConfig:
     prior_turn_deg: float = 5.0
     prior_shift_m: float = 0.05
     max_points: int = 40
+    min_points: int = 3
+    home_tol_rad: float = 0.05
     consistent_px: float = 3.0
     max_turn_deg: float = 10.0
     max_shift_m: float = 0.10
@@ -68,9 +75,10 @@ class SelfCalibrationConfig:
         if not isinstance(self.enabled, bool):
             raise ConfigError(f"self_calibration.enabled must be true or false, got {self.enabled!r}")
         for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m",
-                     "consistent_px", "max_turn_deg", "max_shift_m"):
+                     "consistent_px", "max_turn_deg", "max_shift_m", "home_tol_rad"):
             require_positive(f"self_calibration.{name}", getattr(self, name))
         require_int("self_calibration.max_points", self.max_points, minimum=1)
+        require_int("self_calibration.min_points", self.min_points, minimum=1)
 
 
 def corrected_camera(nominal: CameraModel, correction: np.ndarray) -> CameraModel:
@@ -97,6 +105,7 @@ class CameraSelfCalibration:
         self._uv: list[np.ndarray] = []
         self._height: list[float] = []
         self._tcp: list[np.ndarray] = []
+        self._at_home: list[bool] = []
 
     @property
     def n_points(self) -> int:
@@ -112,9 +121,11 @@ class CameraSelfCalibration:
     def nominal_error_px(self) -> float:
         return self.error_px(self.nominal)
 
-    def add(self, step: int, uv_px: np.ndarray, height_m: float, tcp_world: np.ndarray) -> CameraModel:
+    def add(self, step: int, uv_px: np.ndarray, height_m: float, tcp_world: np.ndarray, *,
+            at_home: bool = False) -> CameraModel:
         """Record the planner's sighting of the hand at ``step`` (pixel, height relative to ``height_ref``) and the
-        TCP's measured world position; return the camera to lift this step's plan with."""
+        TCP's measured world position (``at_home``: the arm at its home posture); return the camera to lift this
+        step's plan with."""
         uv = np.asarray(uv_px, dtype=float).reshape(2)
         tcp = np.asarray(tcp_world, dtype=float).reshape(3)
         if not (np.all(np.isfinite(uv)) and np.isfinite(height_m) and np.all(np.isfinite(tcp))):
@@ -128,11 +139,14 @@ class CameraSelfCalibration:
         self._uv.append(uv)
         self._height.append(float(height_m))
         self._tcp.append(tcp)
+        self._at_home.append(bool(at_home))
         keep = self.config.max_points
         if len(self._steps) > keep:
-            for lst in (self._steps, self._uv, self._height, self._tcp):
+            for lst in (self._steps, self._uv, self._height, self._tcp, self._at_home):
                 del lst[:-keep]
         if self.camera is self.nominal and self.nominal_error_px() <= self.config.trigger_px:
+            return self.camera
+        if self.n_points < self.config.min_points and not any(self._at_home):
             return self.camera
         self._fit()
         return self.camera

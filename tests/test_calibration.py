@@ -53,12 +53,16 @@ def test_a_knocked_camera_is_recovered_from_hand_sightings():
 
 
 def test_one_sighting_already_corrects_most_of_the_error():
-    """The first (global) plan has one sighting: the hand at home; it still takes most of the knock out."""
+    """The first (global) plan has one sighting: the hand at home, where the network reads it best; it takes most of
+    the knock out. The same sighting with the arm elsewhere waits for min_points (a hand read wrongly, not a knock)."""
     rng = np.random.default_rng(1)
     true = corrected_camera(NOMINAL, KNOCK)
     home = np.array([[-0.05, 0.0, 1.05]])
     uv, height = _sightings(true, home, rng, px_noise=0.0, height_noise=0.0)
-    cam = CameraSelfCalibration(NOMINAL, SelfCalibrationConfig(), height_ref="camera").add(0, uv[0], height[0], home[0])
+    away = CameraSelfCalibration(NOMINAL, SelfCalibrationConfig(), height_ref="camera")
+    assert away.add(0, uv[0], height[0], home[0]) is NOMINAL  # away from home one sighting is not enough
+    cam = CameraSelfCalibration(NOMINAL, SelfCalibrationConfig(), height_ref="camera").add(0, uv[0], height[0], home[0],
+                                                                                           at_home=True)
     table = np.c_[rng.uniform(-0.1, 0.1, 50), rng.uniform(-0.15, 0.15, 50), np.full(50, 0.87)]
     assert _lift_error_m(true, cam, table) < 0.5 * _lift_error_m(true, NOMINAL, table)
 
@@ -120,3 +124,12 @@ def test_sightings_no_camera_pose_explains_are_not_taken_for_a_knock():
         cam = cal.add(i, uv[i], height[i], tcp[i])
     assert cal.nominal_error_px() > 4.0 and cal.rejected_fits > 0
     assert cam is NOMINAL and cal.summary()["refined"] is False and cal.summary()["fit_error_px"] is None
+
+
+def test_away_from_home_a_fit_waits_for_min_points():
+    rng = np.random.default_rng(5)
+    true = corrected_camera(NOMINAL, KNOCK)
+    tcp = _hand_path(3, rng)
+    uv, height = _sightings(true, tcp, rng, px_noise=0.5)
+    cal = CameraSelfCalibration(NOMINAL, SelfCalibrationConfig(min_points=3), height_ref="camera")
+    assert [cal.add(i, uv[i], height[i], tcp[i]) is NOMINAL for i in range(3)] == [True, True, False]

@@ -360,10 +360,12 @@ class LearnedPlanner(NetworkPlanner):
     has_detector = True
     kind = "trajectory"
 
-    def __init__(self, checkpoint, camera: CameraModel, *, config: LearnedPlannerConfig = LearnedPlannerConfig()):
+    def __init__(self, checkpoint, camera: CameraModel, *, config: LearnedPlannerConfig = LearnedPlannerConfig(),
+                 home_q: np.ndarray | None = None):
         super().__init__(checkpoint, camera)
         from tcot_hybrid.data.labels import windows_from_meta
 
+        self.home_q = None if home_q is None else np.asarray(home_q, dtype=float)  # [rad] the robot's home posture
         self.config = config
         w = self.meta["windows"]
         self.windows = windows_from_meta(w)
@@ -386,7 +388,8 @@ class LearnedPlanner(NetworkPlanner):
         path = context_checkpoint(cls.name, ctx)
         ck = load_checkpoint(path, robot=ctx.robot_name, camera=ctx.camera, kind=cls.kind, robot_spec=ctx.robot,
                              world=ctx.world_kind)
-        return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()))
+        return cls(ck, ctx.camera, config=ctx.options.get("learned", LearnedPlannerConfig()),
+                   home_q=getattr(ctx.robot, "home_q", None))
 
     def plan(self, obs: Observation, *, mode: str) -> WaypointPlan:
         if mode not in MODES:
@@ -413,7 +416,9 @@ class LearnedPlanner(NetworkPlanner):
         the hand so far against the TCP's measured position (``obs.tcp_pos_m``; None: the nominal one)."""
         if obs.tcp_pos_m is None or not (np.all(np.isfinite(hand_uv_px)) and np.isfinite(hand_height_m)):
             return self.calibration.camera  # a non-finite output is refused by check_outputs, not taken as a sighting
-        return self.calibration.add(obs.step, hand_uv_px, hand_height_m, obs.tcp_pos_m)
+        tol = self.config.self_calibration.home_tol_rad
+        at_home = self.home_q is not None and bool(np.all(np.abs(np.asarray(obs.q, float) - self.home_q) <= tol))
+        return self.calibration.add(obs.step, hand_uv_px, hand_height_m, obs.tcp_pos_m, at_home=at_home)
 
     def orientations(self, rot6: np.ndarray, camera: CameraModel | None = None) -> np.ndarray:
         """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs, each turned 180
