@@ -96,11 +96,13 @@ def test_the_walk_finds_the_world_when_it_is_there():
 def test_observations_carry_only_copies():
     runner = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=3, planner="learned"))
     obs = runner.observe(0)
+    # proprioception (joints, the TCP from them) and the image; never an object's pose
     assert {f.name for f in dataclasses.fields(obs)} == {"step", "image", "depth_m", "q", "gripper_closed",
-                                                          "instruction"}
+                                                          "instruction", "tcp_pos_m"}
     data = runner.stack.sim.data
-    for arr in (obs.image, obs.q):
+    for arr in (obs.image, obs.q, obs.tcp_pos_m):
         assert isinstance(arr, np.ndarray) and not np.shares_memory(arr, data.qpos)
+        assert not np.shares_memory(arr, data.site_xpos)
 
 
 def test_factories_get_the_context_they_are_entitled_to():

@@ -20,26 +20,29 @@ SECTION = "libero-self-calibration"
 EVAL = (f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20000 "
         f"--modes global,glsr {dev_runs.FOUR_SUITE_MODEL}")
 FIRST = "on, first version (no consistency check)"
+SECOND = "on, second version (one sighting anywhere is enough)"
 # (run, the command that makes it, the commit it ran at); every run on the same machine
 RUNS = (
     ("camshift1", f"{EVAL} --perturb camera_shift --sweep learned.self_calibration.enabled=true,false", "fb5a3a2"),
     ("nominal0", EVAL, "6e5e613, before self-calibration"),
     ("nominal1", EVAL, "dcc912c"),
     ("selfcal2", f"{EVAL} --perturb none,camera_shift", "4fd3d65"),
+    ("posture3", f"{EVAL} --perturb init_posture --sweep learned.self_calibration.enabled=true,false", "8595588"),
+    ("camshift3", f"{EVAL} --perturb camera_shift", "8595588"),
 )
 TRUE_CAMERA = ("true_camera", ".venv/bin/python docs/libero-planner/true_camera.py --part 0 --parts 2 (and --part 1)",
                "fb5a3a2")
 KEEP = ("task", "suite", "mode", "seed", "success", "perturb", "perturbation_fired", "stopped_by")
 # the label of a run's episodes, in table order; the first of each perturbation is the baseline of won / lost
-LABELS = ("off", FIRST, "on", "the moved camera, known exactly")
+LABELS = ("off", FIRST, SECOND, "on", "the moved camera, known exactly")
 
 
 def _label(run: str, e: dict) -> str:
     if run == "true_camera":
-        return LABELS[3]
+        return LABELS[-1]
     if run == "nominal0" or "enabled=false" in (e.get("sweep") or ""):
         return "off"
-    return "on" if run == "selfcal2" else FIRST
+    return {"selfcal2": SECOND, "posture3": "on", "camshift3": "on"}.get(run, FIRST)
 
 
 def gather() -> None:
@@ -69,7 +72,7 @@ def lines() -> list[str]:
     groups: dict = defaultdict(list)
     for r in rows:
         groups[(r["perturb"], r["mode"], r["calibration"], r["run"])].append(r)
-    for pert in ("camera_shift", "none"):
+    for pert in ("camera_shift", "init_posture", "none"):
         for mode in ("global", "glsr"):
             base = {(r["task"], r["seed"]): r["success"] for (p, m, c, _), eps in groups.items()
                     if (p, m, c) == (pert, mode, "off") for r in eps}

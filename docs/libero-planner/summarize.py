@@ -260,7 +260,9 @@ def eval_lines() -> list[str]:
 
 
 PERTURBS = (("shipped checkpoint, the planner camera's pose re-fitted from the hand (\"A knocked camera\")",
-             "eval-perturb-v4"),
+             "eval-perturb-v5"),
+            ("shipped checkpoint, the first self-calibration: one hand sighting anywhere was enough for a fit, and "
+             "init_posture's arm, read 5-9 px off, sent every plan astray", "eval-perturb-v4"),
             ("shipped checkpoint, before camera self-calibration", "eval-perturb-v3"),
             ("shipped checkpoint; object_moved and target_moved laid LIBERO's bottles and boxes on their side then "
              "(docs/reliability.md, \"Findings and fixes\")", "eval-perturb-v2"),
