@@ -18,7 +18,9 @@ trigger the nominal camera is returned unchanged, so undisturbed episodes run ex
 from __future__ import annotations
 
 import dataclasses
+from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -81,14 +83,29 @@ class SelfCalibrationConfig:
         require_int("self_calibration.min_points", self.min_points, minimum=1)
 
 
-def corrected_camera(nominal: CameraModel, correction: np.ndarray) -> CameraModel:
-    """``nominal`` with its pose corrected by ``correction`` = (rotation vector [rad], shift [m]), both in the
-    nominal camera's frame: T_world_cam = T_nominal @ [R(rotvec) | shift]."""
+def corrected_pose(T_nominal: np.ndarray, correction: np.ndarray) -> np.ndarray:
+    """T_world_cam = T_nominal @ [R(rotvec) | shift] for ``correction`` = (rotation vector [rad], shift [m]), both
+    in the nominal camera's frame."""
     c = np.asarray(correction, dtype=float)
     delta = np.eye(4)
     delta[:3, :3] = Rotation.from_rotvec(c[:3]).as_matrix()
     delta[:3, 3] = c[3:]
-    return dataclasses.replace(nominal, T_world_cam=np.asarray(nominal.T_world_cam, float) @ delta)
+    return np.asarray(T_nominal, float) @ delta
+
+
+def corrected_camera(nominal: CameraModel, correction: np.ndarray) -> CameraModel:
+    """``nominal`` with its pose corrected by ``correction`` (:func:`corrected_pose`)."""
+    return dataclasses.replace(nominal, T_world_cam=corrected_pose(nominal.T_world_cam, correction))
+
+
+class Sighting(NamedTuple):
+    """Where the planner saw the hand at a planner step, beside where the joints put it."""
+
+    step: int
+    uv_px: np.ndarray  # (2,) [px]
+    height_m: float  # relative to the height reference [m]
+    tcp_world: np.ndarray  # (3,) [m]
+    at_home: bool  # the arm at its home posture
 
 
 class CameraSelfCalibration:
@@ -101,22 +118,23 @@ class CameraSelfCalibration:
         self.correction = np.zeros(6)
         self.rejected_fits = 0  # fits that did not explain the sightings, or needed too large a correction
         self.fit_error_px: float | None = None  # the taken fit's median pixel residual
-        self._steps: list[int] = []
-        self._uv: list[np.ndarray] = []
-        self._height: list[float] = []
-        self._tcp: list[np.ndarray] = []
-        self._at_home: list[bool] = []
+        self._sightings: deque[Sighting] = deque(maxlen=config.max_points)  # the newest
 
     @property
     def n_points(self) -> int:
-        return len(self._steps)
+        return len(self._sightings)
+
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The kept sightings' pixels (N, 2), TCP positions (N, 3) and heights (N,)."""
+        return (np.array([s.uv_px for s in self._sightings]), np.array([s.tcp_world for s in self._sightings]),
+                np.array([s.height_m for s in self._sightings]))
 
     def error_px(self, camera: CameraModel) -> float:
         """Median pixel distance between the sightings and ``camera``'s projection of the TCP [px]."""
-        if not self._steps:
+        if not self._sightings:
             return 0.0
-        uv, _ = camera.project(np.array(self._tcp))
-        return float(np.median(np.linalg.norm(uv - np.array(self._uv), axis=1)))
+        uv, tcp, _ = self._arrays()
+        return float(np.median(np.linalg.norm(camera.project(tcp)[0] - uv, axis=1)))
 
     def nominal_error_px(self) -> float:
         return self.error_px(self.nominal)
@@ -133,35 +151,25 @@ class CameraSelfCalibration:
                                 f"height = {height_m}, TCP = {tcp.tolist()}")
         if not self.config.enabled:
             return self.camera
-        if self._steps and self._steps[-1] == step:  # a second plan at the same step sees the same image
+        if self._sightings and self._sightings[-1].step == step:  # a second plan at the same step sees the same image
             return self.camera
-        self._steps.append(step)
-        self._uv.append(uv)
-        self._height.append(float(height_m))
-        self._tcp.append(tcp)
-        self._at_home.append(bool(at_home))
-        keep = self.config.max_points
-        if len(self._steps) > keep:
-            for lst in (self._steps, self._uv, self._height, self._tcp, self._at_home):
-                del lst[:-keep]
+        self._sightings.append(Sighting(step, uv, float(height_m), tcp, bool(at_home)))
         if self.camera is self.nominal and self.nominal_error_px() <= self.config.trigger_px:
             return self.camera
-        if self.n_points < self.config.min_points and not any(self._at_home):
+        if self.n_points < self.config.min_points and not any(s.at_home for s in self._sightings):
             return self.camera
         self._fit()
         return self.camera
 
     def _fit(self) -> None:
         cfg = self.config
-        uv, tcp, height = np.array(self._uv), np.array(self._tcp), np.array(self._height)
+        uv, tcp, height = self._arrays()
         prior = np.r_[np.full(3, np.deg2rad(cfg.prior_turn_deg)), np.full(3, cfg.prior_shift_m)]
 
         T_nominal, K = np.asarray(self.nominal.T_world_cam, float), self.nominal.K
 
         def residuals(c):  # the projection of CameraModel.project, without building a camera per evaluation
-            T = T_nominal.copy()
-            T[:3, :3] = T_nominal[:3, :3] @ Rotation.from_rotvec(c[:3]).as_matrix()
-            T[:3, 3] = T_nominal[:3, :3] @ c[3:] + T_nominal[:3, 3]
+            T = corrected_pose(T_nominal, c)
             pc = (tcp - T[:3, 3]) @ T[:3, :3]  # world -> camera: R^T (p - t)
             proj = pc[:, :2] / pc[:, 2:3] @ K[:2, :2].T + K[:2, 2]
             r = [((proj - uv) / cfg.pixel_sigma_px).ravel()]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from collections import defaultdict
 from pathlib import Path
+from statistics import median_high
 
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
@@ -55,11 +56,6 @@ def gather() -> None:
     dev_runs.gather([(n, c) for n, c, _ in RUNS + (TRUE_CAMERA,)], OUT, row)
 
 
-def _median(xs):
-    xs = sorted(xs)
-    return xs[len(xs) // 2] if xs else float("nan")
-
-
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
     commits = {n: c for n, _, c in RUNS + (TRUE_CAMERA,)}
@@ -81,7 +77,7 @@ def lines() -> list[str]:
                 eps, cal, run = groups[key], key[2], key[3]
                 wl = dev_runs.won_lost(base, eps) if cal != "off" and base else "-"
                 errs = [r["nominal_error_px"] for r in eps if r["points"]]
-                err = f"{_median(errs):.1f}" if errs else "-"
+                err = f"{median_high(errs):.1f}" if errs else "-"
                 refined = str(sum(r["refined"] for r in eps)) if errs else "-"
                 out.append(f"| {pert} | {cal} | {run} ({commits[run]}) | {mode} | " + " | ".join(dev_runs.per_suite(eps))
                            + f" | **{sum(r['success'] for r in eps)}/{len(eps)}** | {wl} | {refined} | {err} |")

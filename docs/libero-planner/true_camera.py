@@ -13,6 +13,7 @@ import argparse
 import json
 from pathlib import Path
 
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
 from tcot_hybrid import calibration, perturbations
 from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.episode import EpisodeRunner
@@ -23,7 +24,6 @@ from tcot_hybrid.tasks.registry import suite_task_names
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 OUT = ROOT / "runs" / "dev" / "true_camera" / "episodes.jsonl"
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 CHECKPOINT = "tcot_hybrid/checkpoints/libero_panda_default.safetensors"
 _fire = perturbations.CameraShift.fire
 _add = calibration.CameraSelfCalibration.add
@@ -53,7 +53,7 @@ def main() -> None:
     calibration.CameraSelfCalibration.add = add_unless_known
     OUT.parent.mkdir(parents=True, exist_ok=True)
     done = {(r["task"], r["seed"]) for r in map(json.loads, OUT.read_text().splitlines())} if OUT.is_file() else set()
-    tasks = [t for s in SUITES for t in suite_task_names(s)]
+    tasks = [t for s in dev_runs.SUITES for t in suite_task_names(s)]
     for i, task in enumerate(tasks):
         if i % args.parts != args.part:
             continue
