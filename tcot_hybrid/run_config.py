@@ -29,7 +29,7 @@ from tcot_hybrid.smoothing import SmoothingConfig
 from tcot_hybrid.supervision import SupervisorConfig
 
 STOP_ON = ("auto", "simulator", "detector", "either")
-INIT_MODES = ("shipped", "sampled")
+INIT_MODES = ("shipped", "sampled", "spread")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,7 +40,8 @@ class RunConfig:
         own robot: panda in the workcell, libero_panda on a LIBERO task (its scenes mount that Panda).
     seed: episode seed; the same seed and config give a bit-identical run.
     init: how the episode's scene is laid out: "shipped" (a LIBERO task's shipped init state number
-        seed, 0 <= seed < N: the paper's protocol) or "sampled" (a fresh layout drawn from the seed); None = the
+        seed, 0 <= seed < N: the paper's protocol), "sampled" (a fresh layout drawn from the seed) or "spread" (LIBERO:
+        a sampled layout whose objects range wider than LIBERO's own regions, for training data); None = the
         task's default (LIBERO: shipped; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
     stop_on: what ends the episode before its time limit. "simulator": the task's success predicate

@@ -164,6 +164,7 @@ def record_demo(cfg, *, steps_after_success: int = STEPS_AFTER_SUCCESS, progress
     replans = [e["step"] for e in s.executor.events if e["kind"] == "plan_adopted" and fired and e["step"] >= fired[0]]
     attrs = {
         "task": cfg.task, "suite": task.suite, "instruction": task.instruction, "seed": int(cfg.seed),
+        "init": task.init,
         "robot": cfg.robot, "planner": cfg.planner, "mode": cfg.supervisor.mode,
         "perturb": str(getattr(getattr(cfg, "perturb", None), "name", "none")),
         "source": "demo" if cfg.planner == "oracle" else "rollout",
@@ -451,6 +452,9 @@ def _parser() -> argparse.ArgumentParser:
                         "anything else is recorded as source=rollout)")
     p.add_argument("--checkpoint", help="checkpoint for a learned planner")
     p.add_argument("--mode", help="supervisor mode (default: the config's, global)")
+    p.add_argument("--init", choices=("sampled", "spread"),
+                   help="layouts (default sampled): spread = LIBERO layouts whose objects range wider than LIBERO's "
+                        "own regions (tcot_hybrid.libero.tasks.LAYOUT_SPREAD)")
     p.add_argument("--perturb", help="comma-separated perturbations, one episode per (task, seed, perturbation) "
                                      "(default: the config's, none); `tcot list` shows them")
     p.add_argument("--episodes-per-task", type=int, default=50, help="seeds per task (default 50)")
@@ -500,11 +504,14 @@ def cmd_collect(argv: list[str]) -> int:
         over["robot"] = default_robot(tasks[0])
     if args.mode is not None:
         over["supervisor"] = dataclasses.replace(base.supervisor, mode=args.mode)
+    init = args.init or base.init
     if libero:
-        if base.init == "shipped":
+        if init == "shipped":
             raise ConfigError("LIBERO's shipped init states are the test set (docs/seeds.md): training data uses "
-                              "sampled layouts (init: sampled)")
-        over["init"] = "sampled"
+                              "sampled layouts (--init sampled or spread)")
+        over["init"] = init or "sampled"
+    elif args.init is not None:
+        over["init"] = args.init  # the task refuses a mode it does not know, naming its own
     base = dataclasses.replace(base, **over)
     if args.episodes_per_task < 1 or args.seed_start < 0:
         raise ConfigError(f"--episodes-per-task must be >= 1 and --seed-start >= 0; got "

@@ -61,6 +61,7 @@ DEMO_ATTRS: dict[str, type] = {
     "perturb": str, "perturb_step": int, "recover_step": int, "source": str, "success": bool, "t_success": int, "num_samples": int,
 }
 SOURCES = ("demo", "rollout")
+DEMO_INITS = ("sampled", "spread")  # layouts a demo may hold (never the shipped init states: the test set)
 
 
 CAMERA_KEYS = ("K", "T_world_cam")
@@ -122,6 +123,7 @@ class DemoInfo:
     success: bool
     t_success: int
     num_samples: int
+    init: str = "sampled"  # layout mode (``--init``); files written before it existed hold only sampled layouts
 
 
 def _attr(value: Any) -> Any:
@@ -276,6 +278,9 @@ class DemoFile:
             if key not in g.attrs:
                 raise self._fail(f"{where} lacks attribute {key!r}")
             values[key] = _coerce_attr(self.path, where, key, g.attrs[key], tp)
+        values["init"] = str(_attr(g.attrs.get("init", "sampled")))
+        if values["init"] not in DEMO_INITS:
+            raise self._fail(f"{where} init = {values['init']!r}, expected one of {', '.join(DEMO_INITS)}")
         info = DemoInfo(name=name, **values)
         if camera_per_demo(self.env_args):
             self._demo_camera_arrays(name, where)

@@ -102,9 +102,9 @@ def replay_demo(path: str | Path, name: str, config: ReplayConfig) -> dict:
 
             rot = quat_wxyz_to_matrix(f.read(name, ["obs/robot0_eef_quat"])["obs/robot0_eef_quat"])
     base = RunConfig()
-    # init "sampled": `tcot collect` records only sampled layouts (on LIBERO the default, "shipped", would put the
-    # demo's label on the shipped init state of the same number: another layout, and the test set)
-    cfg = RunConfig(task=info.task, seed=info.seed, init="sampled", robot=info.robot,
+    # the demo's own layout mode (`tcot collect` records sampled or spread layouts, never the shipped init states:
+    # on LIBERO the default, "shipped", would put the demo's label on another layout, and the test set)
+    cfg = RunConfig(task=info.task, seed=info.seed, init=info.init, robot=info.robot,
                     controller=env["controller"], ik=env["ik"],
                     timing=TimingConfig(sim_dt=env["sim_dt"], ctrl_dt=env["ctrl_dt"], plan_dt=env["plan_dt"]),
                     scene=replace(SceneConfig(), planner_camera=env["camera"], planner_image_px=int(env["width"])),

@@ -84,6 +84,34 @@ def _env_class(problem_name: str):
 # (no two simulations ever share one) and puts it back when it closes.
 _IDLE: dict[tuple[str, float], "LiberoScene"] = {}
 BUILD_SEED = 0  # numpy seed for LIBERO's fixture placement when a scene is built
+
+
+@dataclass(frozen=True)
+class LayoutSpread:
+    """Layouts wider than LIBERO's own: its table regions are 2-5 cm boxes, one per object, so a planner
+    trained on them can learn where each object stands instead of looking (under ``object_moved`` it grasped
+    where the object had been). Every movable object's region is shifted by one common offset (uniform in
+    +-``shift_m`` in x and y: the objects keep their relations, which the spatial suite's instructions name,
+    "the bowl between the plate and the ramekin") and grown by ``widen_m`` on each side. Fixtures stay."""
+
+    shift_m: float = 0.08  # [m] the whole arrangement moves by up to this, in x and in y
+    widen_m: float = 0.02  # [m] each object's region grows by this on every side
+
+    def __post_init__(self):
+        for name in ("shift_m", "widen_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= 0.3):
+                raise ValueError(f"LayoutSpread.{name} = {value!r} must be in [0, 0.3] m")
+
+    def apply(self, regions: dict, rng) -> tuple[float, float]:
+        """Move ``regions`` (sampler -> its compiled ranges, from :meth:`LiberoScene.table_regions`) in place;
+        returns the common shift (dx, dy) [m] drawn from ``rng`` (numpy's global generator, as LIBERO's)."""
+        dx, dy = (float(v) for v in rng.uniform(-self.shift_m, self.shift_m, size=2))
+        w = self.widen_m
+        for sampler, (x_ranges, y_ranges) in regions.items():
+            sampler.x_ranges = [(lo + dx - w, hi + dx + w) for lo, hi in x_ranges]
+            sampler.y_ranges = [(lo + dy - w, hi + dy + w) for lo, hi in y_ranges]
+        return dx, dy
 MAX_IDLE = 2
 
 
@@ -148,14 +176,18 @@ class LiberoScene:
         return scene
 
     # --- layouts ----------------------------------------------------------------------------------------
-    def sample_layout(self, seed: int) -> None:
+    def sample_layout(self, seed: int, spread: "LayoutSpread | None" = None) -> None:
         """A fresh layout from the task file's placement regions (LIBERO's own sampler), seeded. The sampler
-        draws from numpy's global generator, so it is seeded here and restored afterwards."""
+        draws from numpy's global generator, so it is seeded here and restored afterwards. ``spread`` moves
+        the table regions of the movable objects (see :class:`LayoutSpread`) for this layout only."""
         from robosuite.utils.errors import RandomizationError
 
         state = np.random.get_state()
         np.random.seed(seed % 2**32)
+        regions = self.table_regions()
         try:
+            if spread is not None:
+                spread.apply(regions, np.random)
             for _ in range(100):
                 try:
                     with quiet_stdout():
@@ -167,8 +199,21 @@ class LiberoScene:
                 raise RuntimeError(f"LIBERO could not sample a layout for {self.bddl_path.name} in 100 tries")
         finally:
             np.random.set_state(state)
+            for sampler, (x_ranges, y_ranges) in regions.items():
+                sampler.x_ranges, sampler.y_ranges = x_ranges, y_ranges
         if self.env.sim.model._model is not self.model or self.env.sim.data._data is not self.data:
             raise RuntimeError("LIBERO rebuilt its simulation on reset (hard_reset must stay off)")
+
+    def table_regions(self) -> dict:
+        """The placement samplers that put the task's movable objects on the table (not inside or on top of
+        another object or fixture), each with its (x_ranges, y_ranges) as LIBERO compiled them."""
+        from libero.libero.envs.regions.base_region_sampler import MultiRegionRandomSampler
+
+        movable = set(self.env.objects_dict)
+        return {s: (list(s.x_ranges), list(s.y_ranges))
+                for s in self.env.placement_initializer.samplers.values()
+                if isinstance(s, MultiRegionRandomSampler) and s.mujoco_objects
+                and all(o.name in movable for o in s.mujoco_objects)}
 
     def set_state(self, state: np.ndarray) -> None:
         """A shipped init state: [time, qpos, qvel] as LIBERO saved it."""

@@ -17,6 +17,7 @@ import numpy as np
 
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.libero import libero_available, require_libero
+from tcot_hybrid.libero.scene import LayoutSpread
 from tcot_hybrid.tasks.base import Task, World
 from tcot_hybrid.tasks.objects import ObjectInfo
 
@@ -34,6 +35,9 @@ DEFAULT_TIME_LIMIT_S = 60.0
 CAMERAS = ("agentview", "frontview", "birdview", "sideview", "galleryview", "robot0_robotview", "robot0_eye_in_hand")
 RELOCATION_MARGIN_M = 0.05  # [m] object_moved / target_moved land within the objects' box grown by this
 SETTLE_S = 1.0  # [s] LIBERO's init states hold objects a few mm above their supports: let them land
+# ``--init spread``: the arrangement moves by up to 8 cm and each object's box grows by 2 cm a side, so the
+# objects range over the box object_moved relocates them within (their box grown by RELOCATION_MARGIN_M)
+LAYOUT_SPREAD = LayoutSpread(shift_m=0.08, widen_m=0.02)
 
 
 @dataclass(frozen=True)
@@ -111,11 +115,13 @@ def load_init_states(info: LiberoTaskInfo) -> np.ndarray:
 class LiberoTask(Task):
     """A LIBERO task run by this stack (see module docstring). ``set_episode`` picks the layout: ``shipped``
     = init state number ``seed``, 0 <= seed < N (the paper's protocol; a seed past the shipped states is refused,
-    not wrapped onto one already run), ``sampled`` = a fresh layout from the task file's regions seeded by ``seed``."""
+    not wrapped onto one already run), ``sampled`` = a fresh layout from the task file's regions seeded by ``seed``,
+    ``spread`` = the same with the objects' regions moved and grown (:data:`LAYOUT_SPREAD`: training data that
+    makes a planner look for the objects instead of remembering where LIBERO puts them)."""
 
     world_kind = "libero"
     default_robot = ROBOT
-    init_modes = ("shipped", "sampled")
+    init_modes = ("shipped", "sampled", "spread")
     settle_s = SETTLE_S
 
     def __init__(self, info: LiberoTaskInfo):
@@ -187,7 +193,7 @@ class LiberoTask(Task):
             states = self.init_states()
             self.scene.set_state(states[self.episode_seed])  # in range: set_episode checked it
         else:
-            self.scene.sample_layout(self.episode_seed)
+            self.scene.sample_layout(self.episode_seed, LAYOUT_SPREAD if self.init == "spread" else None)
         self.world = world  # the oracle's skills read it (privileged); rebuilt per episode
         self._oracle = None
 

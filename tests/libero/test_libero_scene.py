@@ -134,6 +134,39 @@ def test_sampled_layouts_are_seeded(libero_runner):
     np.testing.assert_array_equal(np.random.get_state()[1][:5], state)  # numpy's global generator restored
 
 
+def test_spread_layouts_move_the_arrangement_and_leave_libero_regions_as_compiled(libero_runner):
+    """``--init spread``: the whole arrangement moves (up to LAYOUT_SPREAD.shift_m) while the objects keep their
+    relations to within the grown regions; seeded like sampled layouts, and LIBERO's regions are put back."""
+    from tcot_hybrid.libero.tasks import LAYOUT_SPREAD
+
+    task, sim = libero_runner.stack.task, libero_runner.stack.sim
+    regions = {id(s): (list(x), list(y)) for s, (x, y) in task.scene.table_regions().items()}
+    assert len(regions) == 5  # two bowls, the plate, the cookies and the ramekin; not the cabinet or the stove
+
+    def layout(seed, init):
+        task.set_episode(seed=seed, init=init)
+        sim.reset(np.random.default_rng(seed))
+        return np.array([sim.world.pos(n)[:2] for n in sorted(sim.world.objects)])
+
+    sampled = np.array([layout(seed, "sampled") for seed in range(30, 36)])
+    spread = np.array([layout(seed, "spread") for seed in range(30, 36)])
+    np.testing.assert_array_equal(spread[0], layout(30, "spread"))
+    centre_sampled = sampled.mean(axis=1)  # (seed, xy): where the arrangement stands
+    centre_spread = spread.mean(axis=1)
+    print(f"arrangement centre range over 6 seeds: sampled {np.ptp(centre_sampled, axis=0)} m, "
+          f"spread {np.ptp(centre_spread, axis=0)} m")
+    assert np.ptp(centre_sampled, axis=0).max() < 0.03  # LIBERO's own boxes are 2 cm here
+    assert np.ptp(centre_spread, axis=0).max() > 0.04
+    assert np.abs(centre_spread - centre_sampled.mean(axis=0)).max() < LAYOUT_SPREAD.shift_m + 0.03
+    # the objects' relations (offsets from the arrangement's centre) vary no more than the grown regions allow
+    offsets = spread - centre_spread[:, None, :]
+    reference = sampled - centre_sampled[:, None, :]
+    assert np.abs(offsets - reference.mean(axis=0)).max() < 2 * (LAYOUT_SPREAD.widen_m + 0.02)
+    assert {id(s): (list(x), list(y)) for s, (x, y) in task.scene.table_regions().items()} == regions
+    with pytest.raises(ValueError, match=r"shift_m = -0.1 must be in \[0, 0.3\] m"):
+        type(LAYOUT_SPREAD)(shift_m=-0.1)
+
+
 def test_fixtures_are_placed_the_same_on_every_build_and_shipped_episode(libero_runner):
     """robosuite's constructor lets LIBERO place the fixtures from numpy's global generator: unseeded, the
     cabinet moved by up to 1.2 cm between processes and the oracle's grasps with it (RELIABILITY row 22)."""

@@ -29,7 +29,7 @@ def test_robot_auto_follows_the_task():
     assert RunConfig(task="libero_10:whatever").robot == "libero_panda" == default_robot("libero_goal:x")
     assert RunConfig().robot == "panda"
     assert RunConfig(task="libero_10:whatever", robot="panda").robot == "panda"  # explicit stays explicit
-    with pytest.raises(ConfigError, match="shipped, sampled"):
+    with pytest.raises(ConfigError, match="shipped, sampled, spread"):
         RunConfig(init="fresh")
 
 
@@ -95,3 +95,6 @@ def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path,
     assert main(["collect", "--suite", "libero_goal", "--seed-start", "49990", "--episodes-per-task", "20",
                  "--out", out]) == 2
     assert "< 50000" in capsys.readouterr().err
+    assert main(["collect", "--tasks", "goal_cube_on_plate", "--init", "spread", "--out", out]) == 2
+    assert "init = 'spread' is not available for task 'goal_cube_on_plate'; choose one of sampled" in \
+        capsys.readouterr().err
