@@ -112,8 +112,10 @@ class CameraSelfCalibration:
     """One episode's camera estimate (see the module docstring). ``height_ref`` is what the planner's heights are
     measured from: "camera" (its height) or "world" (z = 0; then height residuals say nothing of the camera)."""
 
-    def __init__(self, nominal: CameraModel, config: SelfCalibrationConfig, *, height_ref: str):
+    def __init__(self, nominal: CameraModel, config: SelfCalibrationConfig, *, height_ref: str,
+                 home_q: np.ndarray | None = None):
         self.nominal, self.config, self.height_ref = nominal, config, height_ref
+        self.home_q = None if home_q is None else np.asarray(home_q, dtype=float)  # [rad] the robot's home posture
         self.camera = nominal
         self.correction = np.zeros(6)
         self.rejected_fits = 0  # fits that did not explain the sightings, or needed too large a correction
@@ -139,11 +141,19 @@ class CameraSelfCalibration:
     def nominal_error_px(self) -> float:
         return self.error_px(self.nominal)
 
+    def at_home(self, q: np.ndarray | None) -> bool:
+        """Whether joint positions ``q`` [rad] are the home posture (every joint within ``home_tol_rad``)."""
+        if q is None or self.home_q is None:
+            return False
+        q = np.asarray(q, dtype=float)
+        return q.shape == self.home_q.shape and bool(np.all(np.abs(q - self.home_q) <= self.config.home_tol_rad))
+
     def add(self, step: int, uv_px: np.ndarray, height_m: float, tcp_world: np.ndarray, *,
-            at_home: bool = False) -> CameraModel:
+            q: np.ndarray | None = None) -> CameraModel:
         """Record the planner's sighting of the hand at ``step`` (pixel, height relative to ``height_ref``) and the
-        TCP's measured world position (``at_home``: the arm at its home posture); return the camera to lift this
-        step's plan with."""
+        TCP's measured world position, with the arm's joint positions ``q`` [rad] (None: unknown, not at home);
+        return the camera to lift this step's plan with."""
+        at_home = self.at_home(q)
         uv = np.asarray(uv_px, dtype=float).reshape(2)
         tcp = np.asarray(tcp_world, dtype=float).reshape(3)
         if not (np.all(np.isfinite(uv)) and np.isfinite(height_m) and np.all(np.isfinite(tcp))):

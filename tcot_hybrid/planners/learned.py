@@ -365,7 +365,6 @@ class LearnedPlanner(NetworkPlanner):
         super().__init__(checkpoint, camera)
         from tcot_hybrid.data.labels import windows_from_meta
 
-        self.home_q = None if home_q is None else np.asarray(home_q, dtype=float)  # [rad] the robot's home posture
         self.config = config
         w = self.meta["windows"]
         self.windows = windows_from_meta(w)
@@ -378,7 +377,8 @@ class LearnedPlanner(NetworkPlanner):
         self.height_ref = self.meta.get("height_ref", "world")
         height_reference(camera, self.height_ref)  # an unknown height_ref is refused here, not at the first plan
         self.min_z_m, self.floor_note = lowest_plan_height(self.meta, camera, config.min_height_m)
-        self.calibration = CameraSelfCalibration(camera, config.self_calibration, height_ref=self.height_ref)
+        self.calibration = CameraSelfCalibration(camera, config.self_calibration, height_ref=self.height_ref,
+                                                 home_q=home_q)
 
     @classmethod
     def from_context(cls, ctx) -> LearnedPlanner:
@@ -416,9 +416,7 @@ class LearnedPlanner(NetworkPlanner):
         the hand so far against the TCP's measured position (``obs.tcp_pos_m``; None: the nominal one)."""
         if obs.tcp_pos_m is None or not (np.all(np.isfinite(hand_uv_px)) and np.isfinite(hand_height_m)):
             return self.calibration.camera  # a non-finite output is refused by check_outputs, not taken as a sighting
-        tol = self.config.self_calibration.home_tol_rad
-        at_home = self.home_q is not None and bool(np.all(np.abs(np.asarray(obs.q, float) - self.home_q) <= tol))
-        return self.calibration.add(obs.step, hand_uv_px, hand_height_m, obs.tcp_pos_m, at_home=at_home)
+        return self.calibration.add(obs.step, hand_uv_px, hand_height_m, obs.tcp_pos_m, q=obs.q)
 
     def orientations(self, rot6: np.ndarray, camera: CameraModel | None = None) -> np.ndarray:
         """(N, 3, 3) world TCP orientations of the rotation head's (N, 6) camera-frame outputs, each turned 180
