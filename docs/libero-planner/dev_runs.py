@@ -18,12 +18,23 @@ FOUR_SUITE_MODEL = "--checkpoint tcot_hybrid/checkpoints/libero_panda_default.sa
 
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:
     """For each (run directory under runs/dev, the command that makes it): ``row(run, episode)`` of every episode
-    (None leaves one out), written to ``out``; a missing run is named with its command."""
+    (None leaves one out), written to ``out``; a missing run keeps the rows ``out`` already holds for it (runs/ does
+    not travel between machines, the gathered file does), or is named with its command."""
+    before: dict = defaultdict(list)
+    if out.is_file():
+        for line in out.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                before[r.get("run")].append(r)
     rows = []
     for name, cmd in runs:
         p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
         if not p.is_file():
-            print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
+            if before.get(name):
+                print(f"{name}: runs/dev/{name} is not on this machine; keeping its {len(before[name])} gathered rows")
+                rows += before[name]
+            else:
+                print(f"missing {p}: run `{cmd} --workers 2 --out runs/dev/{name}`")
             continue
         for line in p.read_text().splitlines():
             r = row(name, json.loads(line))
@@ -113,14 +124,17 @@ def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) ->
             + [f"- `{name}`: `{cmd}`" for name, cmd in runs])
 
 
-def main(doc: str, gather_runs: Callable[[], None], lines: Callable[[], list[str]], section: str) -> None:
-    """``--gather`` runs ``gather_runs`` first; then ``lines()`` replaces ``section`` in docs/libero-planner.md."""
+def main(doc: str, gather_runs: Callable[[], None], lines: Callable[[], list[str]] | dict[str, Callable[[], list[str]]],
+         section: str | None = None) -> None:
+    """``--gather`` runs ``gather_runs`` first; then ``lines()`` replaces ``section`` in docs/libero-planner.md (or,
+    ``lines`` a dict section -> its lines function, each of those sections)."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--gather", action="store_true", help="read runs/dev/* into the script's JSON file first")
     if ap.parse_args().gather:
         gather_runs()
     from tcot_hybrid.markdown import update_readme_section
 
-    text = "\n".join(lines())
-    update_readme_section(ROOT / "docs" / "libero-planner.md", section, text)
-    print(text)
+    for name, make in (lines.items() if isinstance(lines, dict) else ((section, lines),)):
+        text = "\n".join(make())
+        update_readme_section(ROOT / "docs" / "libero-planner.md", name, text)
+        print(text)
