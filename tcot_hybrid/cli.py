@@ -160,6 +160,7 @@ def cmd_run(argv: list[str]) -> int:
 
     from tcot_hybrid.episode import EpisodeRunner, write_record
     from tcot_hybrid.video import EpisodeVideo, Timeline
+    from tcot_hybrid.workers import one_torch_thread
 
     cmd = parse_with_config(RunCommand, perturb_shorthand(argv), "tcot run")
     if cmd.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
@@ -205,7 +206,9 @@ def cmd_run(argv: list[str]) -> int:
     record: dict | None = None
     abort: BaseException | None = None
     try:
-        with tqdm(total=total, desc=cmd.cfg.task, unit="step", leave=False, disable=None) as bar:
+        # torch on one thread, as in `tcot eval`: the network's outputs differ in their last bits between thread
+        # counts, and a LIBERO episode can go another way from there, so `tcot run` replays an evaluated episode
+        with one_torch_thread(), tqdm(total=total, desc=cmd.cfg.task, unit="step", leave=False, disable=None) as bar:
             record = runner.run(progress=bar)
     except BaseException as exc:  # noqa: BLE001 - re-raised below, after the record is written
         abort = exc

@@ -76,3 +76,28 @@ def test_run_perturb_shorthand():
         cmd = parse_with_config(RunCommand, perturb_shorthand(["--task", "goal_cube_on_plate", *argv]), "tcot run")
         assert cmd.cfg.perturb.name == "object_drop"
     assert perturb_shorthand(["--perturb.strength", "0.05"]) == ["--perturb.strength", "0.05"]
+
+
+def test_run_infers_on_one_torch_thread_as_eval_does(tmp_path, monkeypatch):
+    """A LIBERO episode replayed with `tcot run` went another way than in `tcot eval` (two torch threads against the
+    worker's one change the network's last bits): `tcot run` infers on one thread too, and restores the count."""
+    import torch
+
+    from tcot_hybrid import episode
+    from tcot_hybrid.cli import main
+    from tcot_hybrid.workers import ONE_THREAD_ENV
+
+    for k in ONE_THREAD_ENV:
+        monkeypatch.delenv(k, raising=False)
+    seen = []
+    run = episode.EpisodeRunner.run
+    monkeypatch.setattr(episode.EpisodeRunner, "run",
+                        lambda self, *a, **kw: seen.append(torch.get_num_threads()) or run(self, *a, **kw))
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        assert main(["run", "--task", "goal_open_drawer", "--seed", "3", "--planner", "learned",
+                     "--out", str(tmp_path)]) == 0
+        assert seen == [1] and torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
