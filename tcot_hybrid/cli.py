@@ -239,6 +239,24 @@ def cmd_run(argv: list[str]) -> int:
     return 0
 
 
+def _check_one_layout_mode(first: RunConfig, last: RunConfig) -> None:
+    """Without --init, a LIBERO cell whose seeds run past the shipped init states would mix them with sampled layouts
+    (the default changes there): refused, naming both, so one table never holds two kinds of layout."""
+    if first.init is not None:
+        return
+    from tcot_hybrid.errors import ConfigError
+    from tcot_hybrid.tasks import make_task
+
+    modes = []
+    for cfg in (first, last):
+        task = make_task(cfg.task)
+        task.set_episode(seed=cfg.seed, init=None)
+        modes.append(task.init)
+    if modes[0] != modes[1]:
+        raise ConfigError(f"seeds {first.seed}-{last.seed} of {first.task!r} would run {modes[0]} layouts and then "
+                          f"{modes[1]} ones ({task.init_note}); give --init {modes[0]} or --init {modes[1]}")
+
+
 def run_notes(record: dict) -> list[str]:
     """What a reader of one episode's summary must not miss: a perturbation that did not fire (and why), how a
     detector-stopped episode ended."""
@@ -326,13 +344,16 @@ def cmd_eval(argv: list[str]) -> int:
     from tcot_hybrid.planners import check_checkpoint_used
 
     check_checkpoint_used(cmd.cfg.checkpoint, sorted({j.cfg.planner for j in jobs}))
-    last_seed = {}  # every name checked before any episode runs, with each cell's last seed (a shipped init state)
+    first_seed, last_seed = {}, {}  # every name checked before any episode runs, with each cell's last seed
     for j in jobs:
         key = (j.cfg.task, j.cfg.robot, j.cfg.controller, j.cfg.ik, j.cfg.planner, j.cfg.supervisor.mode)
         if key not in last_seed or j.cfg.seed > last_seed[key].seed:
             last_seed[key] = j.cfg
-    for cfg in last_seed.values():
-        validate_names(cfg)
+        if key not in first_seed or j.cfg.seed < first_seed[key].seed:
+            first_seed[key] = j.cfg
+    for key, cfg in last_seed.items():
+        validate_names(cfg)  # a shipped init state past the task's is refused here
+        _check_one_layout_mode(first_seed[key], cfg)
     result = evaluate(jobs, cmd.out, workers=cmd.workers, ray_address=cmd.ray_address)
     if cmd.readme:
         from tcot_hybrid.markdown import update_readme_section

@@ -162,14 +162,16 @@ class EpisodeRunner:
         self.reach_warnings = reach_warnings(self.stack)  # before any step: printed by `tcot run`, recorded
 
     def warning_lines(self) -> list[str]:
-        """One line per grasp/release point of this layout the robot cannot reach top-down."""
+        """The task's note on its layout (a LIBERO seed past the shipped init states), then one line per grasp/release
+        point of this layout the robot cannot reach top-down."""
         from tcot_hybrid.robot import robot_ref
 
         r = self.stack.robot
         where = robot_ref(r)
-        return [f"robot {r.name!r} cannot reach the {w['target']} point {w['pos']} m of {self.cfg.task!r} top-down "
-                f"(IK misses it by {w['pos_err_m'] * 100:.1f} cm): the episode will likely fail; `tcot robot check "
-                f"{where}` maps its reach" for w in self.reach_warnings]
+        note = [self.stack.task.init_note] if self.stack.task.init_note else []
+        return note + [f"robot {r.name!r} cannot reach the {w['target']} point {w['pos']} m of {self.cfg.task!r} "
+                       f"top-down (IK misses it by {w['pos_err_m'] * 100:.1f} cm): the episode will likely fail; "
+                       f"`tcot robot check {where}` maps its reach" for w in self.reach_warnings]
 
     def observe(self, step: int) -> Observation:
         """The planner's observation at this step (rendered at most once per step)."""
@@ -370,7 +372,8 @@ class EpisodeRunner:
         return {
             "task": cfg.task, "suite": s.task.suite, "instruction": s.task.instruction,
             "robot": cfg.robot, "controller": cfg.controller, "ik": cfg.ik, "planner": cfg.planner,
-            "mode": cfg.supervisor.mode, "seed": cfg.seed,
+            "mode": cfg.supervisor.mode, "seed": cfg.seed, "init": s.task.init,
+            **({"init_note": s.task.init_note} if s.task.init_note else {}),
             "success": success, "fault": self.fault,
             "success_time_s": self.success_time_s if success else None,
             "sim_time_s": round(s.sim.time_s, 4), "wall_time_s": round(wall_time_s, 4),

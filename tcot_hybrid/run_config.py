@@ -42,7 +42,8 @@ class RunConfig:
     init: how the episode's scene is laid out: "shipped" (a LIBERO task's shipped init state number
         seed, 0 <= seed < N: the paper's protocol), "sampled" (a fresh layout drawn from the seed) or "spread" (LIBERO:
         a sampled layout whose objects range wider than LIBERO's own regions, for training data); None = the
-        task's default (LIBERO: shipped; the workcell knows only sampled).
+        task's default (LIBERO: shipped for a seed that names a shipped state, sampled past them, which the
+        record's ``init_note`` says; the workcell knows only sampled).
     controller_params: overrides of the chosen controller's config fields, e.g. {"kp_scale": 2.0}.
     stop_on: what ends the episode before its time limit. "simulator": the task's success predicate
         (privileged; what a benchmark uses). "detector": the planner's failure detector, once it has judged the

@@ -117,7 +117,8 @@ class LiberoTask(Task):
     = init state number ``seed``, 0 <= seed < N (the paper's protocol; a seed past the shipped states is refused,
     not wrapped onto one already run), ``sampled`` = a fresh layout from the task file's regions seeded by ``seed``,
     ``spread`` = the same with the objects' regions moved and grown (:data:`LAYOUT_SPREAD`: training data that
-    makes a planner look for the objects instead of remembering where LIBERO puts them)."""
+    makes a planner look for the objects instead of remembering where LIBERO puts them). No init mode (the default)
+    is ``shipped`` for a seed that names a shipped state and ``sampled`` past them (``init_note`` says so)."""
 
     world_kind = "libero"
     default_robot = ROBOT
@@ -178,6 +179,14 @@ class LiberoTask(Task):
         return self._init_states
 
     def set_episode(self, *, seed: int, init: str | None) -> None:
+        self.init_note = None
+        if init is None and not 0 <= seed < len(self.init_states()):
+            # the default, shipped, has no state of this number: a sampled layout, said in the record and by
+            # `tcot run` (an explicit --init shipped is refused below instead)
+            n = len(self.init_states())
+            init = "sampled"
+            self.init_note = (f"seed {seed} is past the {n} shipped init states of {self.name!r} (seeds 0-{n - 1}): "
+                              f"a sampled layout from the seed instead (--init sampled; --init shipped refuses it)")
         super().set_episode(seed=seed, init=init)
         if self.init == "shipped":
             n = len(self.init_states())  # a missing file is refused now, before anything is built

@@ -295,6 +295,7 @@ class Task(ABC):
     settle_s: ClassVar[float] = 0.2  # [s] objects settle (robot holding home) before the first planner step
     default_robot: ClassVar[str | None] = None
     init_modes: ClassVar[tuple[str, ...]] = ("sampled",)
+    init_note: str | None = None  # why the episode's layout is not the default's (a task whose default depends on the seed)
     world_kind: ClassVar[str] = "workcell"  # "workcell" or "libero"
 
     def build_scene(self, robot, *, timing, scene):

@@ -81,6 +81,16 @@ def test_a_seed_past_the_shipped_init_states_is_refused_not_wrapped(tmp_path, ca
     err = capsys.readouterr().err
     assert "seed 50 is not a shipped init state" in err and "--init sampled" in err
     assert not (tmp_path / "e" / "episodes.jsonl").exists()
+    # without --init (the default) a seed past the shipped states is a sampled layout, and says so
+    task.set_episode(seed=1001, init=None)
+    assert task.init == "sampled" and "seed 1001 is past the 50 shipped init states" in task.init_note
+    task.set_episode(seed=3, init=None)
+    assert task.init == "shipped" and task.init_note is None
+    # ... but an eval cell never mixes the two kinds of layout
+    assert main(["eval", "--tasks", task.name, "--seed-start", "49", "--episodes", "2", "--out", str(tmp_path / "f")]) == 2
+    err = capsys.readouterr().err
+    assert "seeds 49-50" in err and "would run shipped layouts and then sampled ones" in err
+    assert "give --init shipped or --init sampled" in err
 
 
 def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path, capsys):
@@ -98,3 +108,15 @@ def test_collect_never_takes_libero_test_states_and_keeps_worlds_apart(tmp_path,
     assert main(["collect", "--tasks", "goal_cube_on_plate", "--init", "spread", "--out", out]) == 2
     assert "init = 'spread' is not available for task 'goal_cube_on_plate'; choose one of sampled" in \
         capsys.readouterr().err
+
+
+def test_run_without_init_past_the_shipped_states_records_its_sampled_layout(tmp_path, capsys):
+    """`tcot run --task <libero task> --seed 1001` (public seeds run every listed task so): a sampled layout, said on
+    stderr and in the record (``init``, ``init_note``), not a refusal."""
+    pytest.importorskip("libero.libero")
+    task = "libero_goal:open_the_middle_drawer_of_the_cabinet"
+    assert main(["run", "--task", task, "--seed", "1001", "--planner", "oracle", "--out", str(tmp_path)]) == 0
+    assert "seed 1001 is past the 50 shipped init states" in capsys.readouterr().err
+    rec = json.loads((tmp_path / "episode.json").read_text())
+    assert rec["init"] == "sampled" and "past the 50 shipped init states" in rec["init_note"]
+    assert rec["success"] and rec["max_joint_limit_violation_rad"] == 0.0
