@@ -184,7 +184,7 @@ class LiberoScene:
 
         state = np.random.get_state()
         np.random.seed(seed % 2**32)
-        regions = self.table_regions()
+        regions = self.table_regions() if spread is not None else {}  # put back below: the scene is reused
         try:
             if spread is not None:
                 spread.apply(regions, np.random)

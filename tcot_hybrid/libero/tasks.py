@@ -180,16 +180,15 @@ class LiberoTask(Task):
 
     def set_episode(self, *, seed: int, init: str | None) -> None:
         self.init_note = None
-        if init is None and not 0 <= seed < len(self.init_states()):
+        n = len(self.init_states()) if init in (None, "shipped") else 0
+        if init is None and not 0 <= seed < n:
             # the default, shipped, has no state of this number: a sampled layout, said in the record and by
             # `tcot run` (an explicit --init shipped is refused below instead)
-            n = len(self.init_states())
             init = "sampled"
             self.init_note = (f"seed {seed} is past the {n} shipped init states of {self.name!r} (seeds 0-{n - 1}): "
                               f"a sampled layout from the seed instead (--init sampled; --init shipped refuses it)")
         super().set_episode(seed=seed, init=init)
-        if self.init == "shipped":
-            n = len(self.init_states())  # a missing file is refused now, before anything is built
+        if self.init == "shipped":  # a missing init-state file was refused above, before anything is built
             if not 0 <= seed < n:
                 raise ConfigError(f"seed {seed} is not a shipped init state of LIBERO task {self.name!r}: it ships "
                                   f"{n}, seeds 0-{n - 1} (the paper's protocol: --seed-start 0 --episodes {n}); "
