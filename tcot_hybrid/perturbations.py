@@ -111,7 +111,9 @@ def _first_open_skill(runner):
 
 
 def _relocate(runner, name: str, distance: float, rng) -> dict | None:
-    """Move a free object ``distance`` [m] in a random direction to a free spot in the workspace."""
+    """Move a free object ``distance`` [m] in a random direction to a free spot in the workspace: clear of the
+    other objects' footprints and overlapping nothing (a LIBERO plate dropped into a box or a fixture is pushed
+    through the table: a simulator fault, not a perturbation)."""
     world = runner.stack.sim.world
     if name not in world.objects:  # e.g. a LIBERO fixture or region (a cabinet, a plate's site): not movable
         return None
@@ -131,6 +133,9 @@ def _relocate(runner, name: str, distance: float, rng) -> dict | None:
     if zone is None:
         return None
     x0, x1, y0, y1 = zone
+    data = world.data
+    qpos, qvel = data.qpos.copy(), data.qvel.copy()
+    overlapped = 0
     for _ in range(200):
         a = rng.uniform(0, 2 * np.pi)
         p = old[:2] + distance * np.array([np.cos(a), np.sin(a)])
@@ -142,7 +147,14 @@ def _relocate(runner, name: str, distance: float, rng) -> dict | None:
                     info.kind in ("cube", "cylinder")))
             else:  # LIBERO: translated on the same support, its resting orientation kept (set_pose's pure yaw
                 world.shift(name, (p[0] - old[0], p[1] - old[1], 0.001))  # laid bottles and boxes on their side)
-            return {"object": name, "moved_m": np.round(np.append(p - old[:2], 0.0), 4).tolist()}
+            if world.penetrating(name):
+                data.qpos[:], data.qvel[:] = qpos, qvel
+                overlapped += 1
+                continue
+            moved = {"object": name, "moved_m": np.round(np.append(p - old[:2], 0.0), 4).tolist()}
+            return moved | ({"spots_overlapping": overlapped} if overlapped else {})
+    if overlapped:
+        mujoco.mj_fwdPosition(world.model, data)  # the scene as it was, its contacts too
     return None
 
 

@@ -101,6 +101,18 @@ class World:
         self.data.qpos[a:a + 3] += np.asarray(delta, float)
         self.data.qvel[v:v + 6] = 0.0
 
+    def penetrating(self, name: str, depth_m: float = 0.001) -> list[str]:
+        """Bodies the object's geoms overlap by more than ``depth_m`` [m] as the scene stands now (positions
+        and contacts recomputed first: call it after :meth:`shift` or :meth:`set_pose`); [] when it is free."""
+        mujoco.mj_fwdPosition(self.model, self.data)
+        obj, d = self._geoms_of[name], self.data
+        hit = set()
+        for i in range(d.ncon):
+            g1, g2 = int(d.contact.geom1[i]), int(d.contact.geom2[i])
+            if (g1 in obj) != (g2 in obj) and d.contact.dist[i] < -depth_m:
+                hit.add(self.model.body(int(self.model.geom_bodyid[g2 if g1 in obj else g1])).name)
+        return sorted(hit)
+
     def touching(self, name: str, geoms: frozenset[int]) -> bool:
         obj = self._geoms_of[name]
         d = self.data

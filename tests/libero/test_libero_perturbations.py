@@ -84,3 +84,31 @@ def test_camera_shift_first_learned_plan_is_lifted_with_a_camera_nearer_the_move
 
     assert error_px(plan.calibration) < 0.5 * error_px(nominal)
     assert runner.record(0.0)["camera_calibration"]["refined"] is True
+
+
+COOKIE_BOX = "libero_spatial:pick_up_the_black_bowl_on_the_cookie_box_and_place_it_on_the_plate"
+
+
+def test_target_moved_puts_the_plate_where_it_overlaps_nothing():
+    # layout 20001: the first spots 10 cm from the plate overlap the cookie box, and a plate dropped there was
+    # pushed through the table (sim_fault:OBJECT_BELOW_TABLE in every such episode, whatever the planner)
+    cfg = RunConfig(task=COOKIE_BOX, seed=20001, init="sampled", planner="oracle",
+                    perturb=PerturbConfig(name="target_moved"))
+    runner = EpisodeRunner(cfg)
+    runner.settle()
+    world = runner.stack.sim.world
+    before = world.pos("plate_1")
+    assert world.penetrating("plate_1") == []
+    world.shift("plate_1", (world.pos("cookies_1")[:2] - before[:2]).tolist() + [0.0])  # onto the box: named
+    assert "cookies_1_main" in world.penetrating("plate_1")
+    world.shift("plate_1", (before - world.pos("plate_1")).tolist())
+    assert world.penetrating("plate_1") == []
+    for step in range(runner.perturbation.at_step + 1):
+        runner._step_once(step, may_plan=step == 0)
+    fired = [e for e in runner.stack.executor.events if e["kind"] == "perturbation"]
+    assert len(fired) == 1 and fired[0]["object"] == "plate_1" and fired[0]["spots_overlapping"] >= 1
+    assert np.linalg.norm(world.pos("plate_1")[:2] - before[:2]) == pytest.approx(0.10, abs=0.02)
+    assert world.penetrating("plate_1") == []
+    for step in range(runner.perturbation.at_step + 1, runner.perturbation.at_step + 11):
+        runner._step_once(step, may_plan=False)
+    assert runner.stack.sim.fault is None and world.pos("plate_1")[2] == pytest.approx(before[2], abs=0.01)
