@@ -259,8 +259,10 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint, the planner camera's pose re-fitted from the hand (\"A knocked camera\")",
-             "eval-perturb-v5"),
+PERTURBS = (("shipped checkpoint, a moved object's new spot checked to overlap nothing (docs/reliability.md, "
+             "\"Findings and fixes\")", "eval-perturb-v6"),
+            ("shipped checkpoint, the planner camera's pose re-fitted from the hand (\"A knocked camera\"); a moved "
+             "LIBERO object could land inside another", "eval-perturb-v5"),
             ("shipped checkpoint, the first self-calibration: one hand sighting anywhere was enough for a fit, and "
              "init_posture's arm, read 5-9 px off, sent every plan astray", "eval-perturb-v4"),
             ("shipped checkpoint, before camera self-calibration", "eval-perturb-v3"),
