@@ -1,6 +1,6 @@
 """Whether training on spread layouts (`--init spread`, docs/libero-planner.md "Data and seeds") teaches the planner
 to look where an object stands: v6 (examples/configs/train_libero_v6.yaml, the shipped checkpoint fine-tuned with the
-spread demos added) and v7 (train_libero_v7.yaml, a lighter share of them) against the shipped checkpoint,
+spread demos added) and v7 (train_libero_v7.yaml, the same data for 8 epochs) against the shipped checkpoint,
 unperturbed and under `object_moved` and `target_moved`, on sampled development layouts (docs/seeds.md: seeds 20000+,
 never the shipped init states, never 90000+). The checkpoints of a table run at the same commit on the same machine:
 
@@ -21,7 +21,7 @@ EVAL = (f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --ep
         "--modes glsr,global")
 SHIPPED = ("shipped (sampled layouts only)", dev_runs.FOUR_SUITE_MODEL)
 V6 = ("v6 (spread layouts added)", "--checkpoint runs/libero/planner_v6.safetensors")
-V7 = ("v7 (every third spread frame, 8 epochs)", "--checkpoint runs/libero/planner_v7.safetensors")
+V7 = ("v7 (v6's data, 8 epochs)", "--checkpoint runs/libero/planner_v7.safetensors")
 # (perturbation, the table's heading, its runs: (run, checkpoint), the shipped checkpoint's first); each table's
 # runs were made at one commit (the overlap check of a moved object's spot came between the two object_moved ones)
 TABLES = (("none", "unperturbed (v6 at a46c51e, v7 at a0ea256: nothing is moved, the code between them runs alike)",
