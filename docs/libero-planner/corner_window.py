@@ -34,8 +34,7 @@ TRIALS = {
 def trial_runs(section: str) -> tuple:
     """(run, mode, checkpoint label, command) of one trial, the shipped checkpoint's rows first."""
     base, run, label, cmd = TRIALS[section]
-    return tuple((r, mode, lab, c) for r, lab, c in ((base, SHIPPED_LABEL, SHIPPED), (run, label, cmd))
-                 for mode in ("global", "glsr"))
+    return dev_runs.per_mode(((base, SHIPPED_LABEL, SHIPPED), (run, label, cmd)))
 
 
 KEEP = ("task", "suite", "mode", "seed", "success")

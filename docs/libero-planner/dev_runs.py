@@ -98,6 +98,12 @@ def model_table(rows: list[dict], table_rows, suite: str) -> list[str]:
     return out
 
 
+def per_mode(runs) -> tuple:
+    """(run, mode, checkpoint label, command) for each (run, checkpoint label, command) in ``runs`` and each of its
+    modes, global-only first: the rows :func:`checkpoint_table` takes."""
+    return tuple((run, mode, label, cmd) for run, label, cmd in runs for mode in ("global", "glsr"))
+
+
 def checkpoint_table(rows: list[dict], runs) -> list[str]:
     """Successes / episodes per suite of each (run, mode, checkpoint label, command) in ``runs``, read from gathered
     ``rows`` (each with its ``run``); each mode's first row is the baseline its won / lost counts against."""

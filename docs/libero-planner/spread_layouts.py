@@ -40,7 +40,7 @@ def command(perturb: str, checkpoint: str) -> str:
 def trial_runs(table: tuple) -> tuple:
     """(run, mode, checkpoint label, command) of one table, the shipped checkpoint's rows first."""
     perturb, _, runs = table
-    return tuple((run, mode, label, command(perturb, ck)) for run, (label, ck) in runs for mode in ("global", "glsr"))
+    return dev_runs.per_mode((run, label, command(perturb, ck)) for run, (label, ck) in runs)
 
 
 def all_runs() -> dict:
