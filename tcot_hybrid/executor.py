@@ -451,6 +451,19 @@ class MotionExecutor:
         self.controller.reset(self.dyn, self._last_tau)
         self.event("reference_resynced", reason=reason)
 
+    def put_down_ahead_m(self) -> float | None:
+        """How far the active plan lowers the hand before its next release [m]: the highest of the TCP and the plan's
+        points from the active one to the release, less the release point's height. None when no plan is active or
+        it opens the gripper nowhere ahead (it carries the closed hand to its end)."""
+        if self.phase not in ("move", "settle") or self.index < 0:
+            return None
+        ahead = np.flatnonzero(~self.grip[self.index:])
+        if ahead.size == 0:
+            return None
+        release = self.index + int(ahead[0])
+        top = max(float(self.sim.tcp_pos()[2]), float(self.points[self.index:release + 1, 2].max()))
+        return top - float(self.points[release, 2])
+
     def open_empty_gripper(self, opening_m: float) -> None:
         """The closed gripper holds nothing (its fingers met): open it, so the next plan starts from an open hand."""
         self.sim.set_gripper(False)

@@ -92,6 +92,13 @@ class SupervisorConfig:
     empty_grasp_lift_m: how far above the point where it closed the hand must be for an empty gripper to count as
                        a missed or lost object [m]. Down: reacts sooner after a miss, but may reopen a closed hand
                        that turns a knob or pushes a door; up: later.
+    empty_grasp_put_down_m: a closed empty hand that lifted counts as a missed or lost object only when its plan
+                       lowers the hand at least this much [m] before the plan's next release, or never releases: a
+                       plan that opens the hand in the air closed it empty on purpose (the oracle's commanded path
+                       turns the stove knob with closed fingers, then carries the closed hand up and over to the next
+                       grasp before opening it; docs/libero-planner.md, "Empty grasps"). None: every closed empty
+                       hand that lifted counts (the check before stop 42). Up: fewer reopenings of a hand that puts
+                       a missing object down.
     home_retries:      glsr only: how many times an episode the arm may go home and plan globally again (see the
                        module doc), or "auto": HOME_RETRIES_LIBERO on LIBERO (by measurement on development layouts:
                        docs/libero-planner.md, "Retries from home"), 0 on the workcell (its reporting tables were
@@ -118,6 +125,7 @@ class SupervisorConfig:
     empty_grasp_m: float = 0.0025
     empty_grasp_steps: int = 3
     empty_grasp_lift_m: float = 0.04
+    empty_grasp_put_down_m: float | None = 0.03
     home_retries: int | Literal["auto"] = "auto"
     home_lift_m: float = 0.10
 
@@ -129,6 +137,8 @@ class SupervisorConfig:
         require_positive("supervisor.empty_grasp_m", self.empty_grasp_m)
         require_int("supervisor.empty_grasp_steps", self.empty_grasp_steps, minimum=1)
         require_positive("supervisor.empty_grasp_lift_m", self.empty_grasp_lift_m)
+        if self.empty_grasp_put_down_m is not None:
+            require_positive("supervisor.empty_grasp_put_down_m", self.empty_grasp_put_down_m)
         if isinstance(self.home_retries, str):
             require_choice("supervisor.home_retries", self.home_retries, ("auto",))
         else:
@@ -172,6 +182,7 @@ class Supervisor:
                                                                   and world_kind == "libero")
         self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
         self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
+        self._empty_planned_at: float | None = None  # where the hand closed that a plan carries empty on purpose
         retries = config.home_retries
         if retries == "auto":
             retries = HOME_RETRIES_LIBERO if world_kind == "libero" else 0
@@ -341,7 +352,8 @@ class Supervisor:
         """The measured finger opening [m] once the closed gripper has measured empty for ``empty_grasp_steps`` steps
         while the hand is at least ``empty_grasp_lift_m`` above where a plan closed it, else None: a pick lifts what it
         holds, while a knob turned or a drawer or door pushed with closed fingers (an empty hand on purpose) keeps
-        low."""
+        low. And only while the plan puts something down before it next opens the hand (``empty_grasp_put_down_m``):
+        a plan that opens it in the air meant the hand empty (event ``empty_hand_planned``, once a grasp)."""
         sim = executor.sim
         closed_at = executor.grasp_tcp_z
         opening = sim.gripper_opening_m()
@@ -351,6 +363,13 @@ class Supervisor:
         if self._empty_steps < self.cfg.empty_grasp_steps:
             return None
         self._empty_steps = 0
+        if self.cfg.empty_grasp_put_down_m is not None:
+            put_down = executor.put_down_ahead_m()
+            if put_down is not None and put_down < self.cfg.empty_grasp_put_down_m:
+                if self._empty_planned_at != closed_at:
+                    self._empty_planned_at = closed_at
+                    executor.event("empty_hand_planned", opening_m=round(opening, 5), put_down_m=round(put_down, 4))
+                return None
         return opening
 
     def _geometric_reason(self, executor) -> str | None:

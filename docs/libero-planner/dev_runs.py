@@ -64,11 +64,12 @@ def gather_suite(runs: Iterable[tuple[str, str]], out: Path, suite: str) -> None
                                        if e["perturb"] == "none" and e["suite"] == suite else None))
 
 
-def model_table(rows: list[dict], table_rows, suite: str) -> list[str]:
+def model_table(rows: list[dict], table_rows, suite: str, first_seed: int = 20000) -> list[str]:
     """A suite's development-layout table: one line per (checkpoint, executor, mode, runs whose episodes of ``suite``
     make the row), each mode's first row the baseline its won / lost counts against; then successes per task for
-    the rows that ran all six layouts 20000-20005. ``rows``: gathered episodes, each with its ``run``."""
-    out = [f"{suite} on sampled development layouts 20000-20005 (6 per task; a row that ran fewer says which; won / "
+    the rows that ran all six layouts from ``first_seed``. ``rows``: gathered episodes, each with its ``run``."""
+    out = [f"{suite} on sampled development layouts {first_seed}-{first_seed + 5} (6 per task; a row that ran fewer "
+           "says which; won / "
            "lost against the first row of its mode on the layouts both ran):", "",
            "| checkpoint | executor | mode | layouts | successes | won / lost |", "|---|---|---|---|---|---|"]
     base: dict = {}

@@ -1,7 +1,8 @@
 """The long suite (libero_10) on 60 sampled development layouts per mode (seeds 20000-20005, 6 per task; docs/seeds.md:
 never the shipped init states, never 90000+): the shipped checkpoint before and after the retreat from a release,
 the 97-point model, and libero_10's own model (examples/configs/train_libero10.yaml), for docs/libero-planner.md,
-"The long suite: its own model, and leaving a release":
+"The long suite: its own model, and leaving a release" (and the section after it, "libero_10's own model on
+corner labels": that model against one trained on the commanded corner labels, on fresh layouts 20020-20025):
 
     .venv/bin/python docs/libero-planner/long_suite.py --gather   # runs/dev/* -> long_suite.json
     .venv/bin/python docs/libero-planner/long_suite.py            # long_suite.json -> docs/libero-planner.md
@@ -16,6 +17,7 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "long_suite.json"
 SECTION = "libero-long-suite"
+SECTION_CORNER = "libero-long-suite-corner"
 ALL4 = f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20000"
 L10 = "tcot eval --suite libero_10 --planners learned --init sampled --episodes 4 --seed-start 20002"
 SHIPPED = dev_runs.FOUR_SUITE_MODEL  # the rows' "shipped (four suites)"
@@ -34,6 +36,25 @@ COMMANDS = {
     "l10_suite": f"tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20000 "
                  f"--modes glsr,global {SUITE_CK}",
 }
+# layouts 20020-20025, which no checkpoint or executor setting was chosen on before (20000-20019 all were looked at)
+CORNER_COMMANDS = {
+    "shipped8": f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20020 "
+                f"--modes glsr,global {SHIPPED}",
+    "l10own": "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20020 "
+              "--modes glsr,global",
+    "l10corner": "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20020 "
+                 "--modes glsr,global --checkpoint runs/libero/planner_libero10_corner.safetensors",
+}
+CORNER_ROWS = (
+    ("libero_10's own model (97 points, observed path)", "retreat from a release", "glsr", ("l10own",)),
+    ("libero_10's own model on corner labels (97 commanded corner points)", "retreat from a release", "glsr",
+     ("l10corner",)),
+    ("shipped (four suites, 51 points)", "retreat from a release", "glsr", ("shipped8",)),
+    ("libero_10's own model (97 points, observed path)", "retreat from a release", "global", ("l10own",)),
+    ("libero_10's own model on corner labels (97 commanded corner points)", "retreat from a release", "global",
+     ("l10corner",)),
+    ("shipped (four suites, 51 points)", "retreat from a release", "global", ("shipped8",)),
+)
 # (checkpoint, executor and stop rule, mode, runs whose libero_10 episodes make the row); each mode's first row is the
 # baseline its won / lost count against
 ROWS = (
@@ -49,13 +70,22 @@ ROWS = (
 
 
 def gather() -> None:
-    dev_runs.gather_suite(COMMANDS.items(), OUT, "libero_10")
+    dev_runs.gather_suite([*COMMANDS.items(), *CORNER_COMMANDS.items()], OUT, "libero_10")
+
+
+def _rows() -> list[dict]:
+    return [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
 
 
 def lines() -> list[str]:
-    rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    return dev_runs.model_table(rows, ROWS, "libero_10") + dev_runs.command_lines("long_suite.py", 2, COMMANDS.items())
+    return (dev_runs.model_table(_rows(), ROWS, "libero_10")
+            + dev_runs.command_lines("long_suite.py", 2, COMMANDS.items()))
+
+
+def corner_lines() -> list[str]:
+    return (dev_runs.model_table(_rows(), CORNER_ROWS, "libero_10", first_seed=20020)
+            + dev_runs.command_lines("long_suite.py", 2, CORNER_COMMANDS.items()))
 
 
 if __name__ == "__main__":
-    dev_runs.main(__doc__, gather, lines, SECTION)
+    dev_runs.main(__doc__, gather, {SECTION: lines, SECTION_CORNER: corner_lines})
