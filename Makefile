@@ -168,6 +168,10 @@ else
 	$(call libero_train_resumable,train_libero10,planner_libero10,train_libero10,)
 	cp runs/libero/planner_libero10.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
 	cp runs/libero/planner_libero10.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
+	# then on the commanded corner labels (stop 42), from the model just copied
+	$(call libero_train_resumable,train_libero10_corner,planner_libero10_corner,train_libero10_corner,)
+	cp runs/libero/planner_libero10_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
+	cp runs/libero/planner_libero10_corner.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
 endif
 	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
 		|| (tail -5 runs/libero/direct_train.log; exit 1)

@@ -261,8 +261,15 @@ class GripperSim:
 
 
 class GripperExecutor(FakeExecutor):
-    def __init__(self, openings):
-        self.sim, self.opened = GripperSim(openings), []
+    def __init__(self, openings, put_down=None):
+        self.sim, self.opened, self.events = GripperSim(openings), [], []
+        self.put_down = put_down  # how far the plan lowers the hand before its next release (None: it never opens)
+
+    def put_down_ahead_m(self):
+        return self.put_down
+
+    def event(self, kind, **info):
+        self.events.append({"kind": kind, **info})
 
     @property
     def grasp_tcp_z(self):  # where the plan closed the hand: the first height
@@ -334,6 +341,40 @@ def test_an_empty_hand_that_keeps_low_is_left_alone_and_a_lost_object_is_noticed
     assert reopenings((0.90, 0.91)) == []  # 1 cm up: a push or a turn
     assert reopenings((0.90, 0.95)) == [4]  # lifted 5 cm from step 2: steps 2, 3, 4
     assert reopenings((0.90, 0.95), openings=(0.004,)) == []  # lifted, holding 4 mm: a held object
+
+
+@pytest.mark.parametrize("put_down, setting, reopened", [
+    (None, 0.03, [4]),  # the plan carries the closed hand to its end: a lost object
+    (0.10, 0.03, [4]),  # it lowers 10 cm to open: it puts the missing object down
+    (0.0, 0.03, []),  # it opens in the air: the hand was closed empty on purpose
+    (0.02, 0.03, []),
+    (0.0, None, [4]),  # the check before stop 42: every lifted empty hand counts
+])
+def test_a_plan_that_opens_the_lifted_empty_hand_in_the_air_meant_it_empty(put_down, setting, reopened):
+    """The stove knob turned with closed fingers, then the closed hand carried up and over to the next grasp (the
+    oracle's commanded path): lifted and empty, but the plan puts nothing down before it opens the hand."""
+    ex = GripperExecutor([0.0012], put_down=put_down)
+    ex.sim.heights = (0.90, 0.95)
+    sup = Supervisor(SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on", confirm_success="off",
+                                      empty_grasp_put_down_m=setting), FakePlanner(0.1))
+    got = []
+    for t in range(12):
+        ex.sim.t = t
+        d = sup.decide(t, observe=lambda: None, executor=ex)
+        if d.event and d.event.get("reason") == "grasp_empty":
+            got.append(t)
+    assert got == reopened and sup.empty_grasps == len(reopened)
+    planned = [e for e in ex.events if e["kind"] == "empty_hand_planned"]
+    assert len(planned) == (0 if reopened else 1)  # once a grasp, not every step
+    if planned:
+        assert planned[0]["put_down_m"] == put_down and ex.opened == []
+
+
+@pytest.mark.parametrize("value", [0.0, -0.01, float("nan"), True])
+def test_bad_put_down_settings_are_refused(value):
+    with pytest.raises(ConfigError) as e:
+        SupervisorConfig(empty_grasp_put_down_m=value)
+    assert "supervisor.empty_grasp_put_down_m" in str(e.value)
 
 
 class HomingExecutor(GripperExecutor):
