@@ -64,10 +64,16 @@ def gather_suite(runs: Iterable[tuple[str, str]], out: Path, suite: str) -> None
                                        if e["perturb"] == "none" and e["suite"] == suite else None))
 
 
-def model_table(rows: list[dict], table_rows, suite: str, first_seed: int = 20000) -> list[str]:
+def _retreat_column(ck: str, how: str, mode: str) -> str:
+    return f"{ck.split(' (')[0]}, {'retreat' if how.startswith('retreat') else 'no retreat'}, {mode}"
+
+
+def model_table(rows: list[dict], table_rows, suite: str, first_seed: int = 20000,
+                column: Callable[[str, str, str], str] = _retreat_column) -> list[str]:
     """A suite's development-layout table: one line per (checkpoint, executor, mode, runs whose episodes of ``suite``
     make the row), each mode's first row the baseline its won / lost counts against; then successes per task for
-    the rows that ran all six layouts from ``first_seed``. ``rows``: gathered episodes, each with its ``run``."""
+    the rows that ran all six layouts from ``first_seed``, headed ``column(checkpoint, executor, mode)``. ``rows``:
+    gathered episodes, each with its ``run``."""
     out = [f"{suite} on sampled development layouts {first_seed}-{first_seed + 5} (6 per task; a row that ran fewer "
            "says which; won / "
            "lost against the first row of its mode on the layouts both ran):", "",
@@ -85,7 +91,7 @@ def model_table(rows: list[dict], table_rows, suite: str, first_seed: int = 2000
         k = sum(e["success"] for e in eps.values())
         out.append(f"| {ck} | {how} | {mode} | {seeds[0]}-{seeds[-1]} ({len(eps)}) | **{k}/{len(eps)}** | {wl} |")
         if len(seeds) == 6:
-            name = f"{ck.split(' (')[0]}, {'retreat' if how.startswith('retreat') else 'no retreat'}, {mode}"
+            name = column(ck, how, mode)
             for (task, _), e in eps.items():
                 got = per_task[task].setdefault(name, [0, 0])
                 got[0] += bool(e["success"])

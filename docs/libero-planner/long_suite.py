@@ -37,24 +37,43 @@ COMMANDS = {
                  f"--modes glsr,global {SUITE_CK}",
 }
 # layouts 20020-20025, which no checkpoint or executor setting was chosen on before (20000-20019 all were looked at)
+L10_FRESH = "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20020"
+ALL4_FRESH = f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20020"
+CORNER_CK = "--checkpoint runs/libero/planner_libero10_corner.safetensors"
+OWN_FILE = "libero10_before_stop42.safetensors"
+OWN_CK = f"--checkpoint {OWN_FILE}"
+PUT_DOWN_OFF = "--supervisor.empty-grasp-put-down-m None"
 CORNER_COMMANDS = {
-    "shipped8": f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20020 "
-                f"--modes glsr,global {SHIPPED}",
-    "l10own": "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20020 "
-              "--modes glsr,global",
-    "l10corner": "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20020 "
-                 "--modes glsr,global --checkpoint runs/libero/planner_libero10_corner.safetensors",
+    "shipped8": f"{ALL4_FRESH} --modes glsr,global {SHIPPED} {PUT_DOWN_OFF} (before the put-down rule)",
+    "l10own": f"{L10_FRESH} --modes glsr,global {OWN_CK} {PUT_DOWN_OFF} "
+              "(before the put-down rule)",
+    "l10corner": f"{L10_FRESH} --modes glsr,global {CORNER_CK} {PUT_DOWN_OFF} (before the put-down rule)",
+    "shipped8_pd": f"{ALL4_FRESH} --modes glsr {SHIPPED}",
+    "l10own_pd": f"{L10_FRESH} --modes glsr {OWN_CK}",
+    "l10corner_pd": f"{L10_FRESH} --modes glsr {CORNER_CK}",
 }
+OWN, CORNER, FOUR = ("libero_10's own model before stop 42 (97 points, observed path)",
+                     "libero_10's own model on corner labels (97 commanded corner points; shipped at stop 42)",
+                     "shipped (four suites, 51 points)")
+BEFORE, PUT_DOWN = "empty-grasp check before the put-down rule", "empty-grasp check with the put-down rule"
 CORNER_ROWS = (
-    ("libero_10's own model (97 points, observed path)", "retreat from a release", "glsr", ("l10own",)),
-    ("libero_10's own model on corner labels (97 commanded corner points)", "retreat from a release", "glsr",
-     ("l10corner",)),
-    ("shipped (four suites, 51 points)", "retreat from a release", "glsr", ("shipped8",)),
-    ("libero_10's own model (97 points, observed path)", "retreat from a release", "global", ("l10own",)),
-    ("libero_10's own model on corner labels (97 commanded corner points)", "retreat from a release", "global",
-     ("l10corner",)),
-    ("shipped (four suites, 51 points)", "retreat from a release", "global", ("shipped8",)),
+    (OWN, BEFORE, "glsr", ("l10own",)),
+    (OWN, PUT_DOWN, "glsr", ("l10own_pd",)),
+    (CORNER, BEFORE, "glsr", ("l10corner",)),
+    (CORNER, PUT_DOWN, "glsr", ("l10corner_pd",)),
+    (FOUR, BEFORE, "glsr", ("shipped8",)),
+    (FOUR, PUT_DOWN, "glsr", ("shipped8_pd",)),
+    (OWN, "-", "global", ("l10own",)),
+    (CORNER, "-", "global", ("l10corner",)),
+    (FOUR, "-", "global", ("shipped8",)),
 )
+
+
+def _corner_column(ck: str, how: str, mode: str) -> str:
+    return (f"{'corner labels' if ck == CORNER else 'own model before'}"
+            f"{', put-down' if how == PUT_DOWN else ', before' if how == BEFORE else ''}, {mode}")
+
+
 # (checkpoint, executor and stop rule, mode, runs whose libero_10 episodes make the row); each mode's first row is the
 # baseline its won / lost count against
 ROWS = (
@@ -83,8 +102,10 @@ def lines() -> list[str]:
 
 
 def corner_lines() -> list[str]:
-    return (dev_runs.model_table(_rows(), CORNER_ROWS, "libero_10", first_seed=20020)
-            + dev_runs.command_lines("long_suite.py", 2, CORNER_COMMANDS.items()))
+    return (dev_runs.model_table(_rows(), CORNER_ROWS, "libero_10", first_seed=20020, column=_corner_column)
+            + dev_runs.command_lines("long_suite.py", 2, CORNER_COMMANDS.items())
+            + ["", f"`{OWN_FILE}` is libero_10's own model before stop 42: `git show "
+               f"455457c:tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors > {OWN_FILE}`."])
 
 
 if __name__ == "__main__":
