@@ -184,6 +184,16 @@ _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a 
 TWIN_MISS_M = 0.03  # an IK answer this far from the waypoint is a miss the arm cannot make up for [m]
 
 
+def put_down_before_release(points: np.ndarray, grip: np.ndarray, closed_at: int) -> float | None:
+    """How far a plan that closes the gripper at point ``closed_at`` lowers the hand before it next opens it [m]: the
+    highest point of the closed stretch less the release point. None when the plan never opens it again."""
+    ahead = np.flatnonzero(~np.asarray(grip[closed_at:], bool))
+    if ahead.size == 0:
+        return None
+    release = closed_at + int(ahead[0])
+    return float(points[closed_at:release + 1, 2].max() - points[release, 2])
+
+
 def _twin_is_better(twin, other, seed: np.ndarray) -> bool:
     """The hand's twin solution beats the other: it converged where the other missed the point by more than
     TWIN_MISS_M; or it moves the arm less from the seed without converging less. (A twin that converges only by a
@@ -227,6 +237,10 @@ class MotionExecutor:
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
         self.grasp_tcp_z: float | None = None  # TCP height where a plan last closed the gripper [m] (None: open)
+        # put_down_before_release of the closed stretch the active plan is carrying out (None: open, the plan never
+        # opens the hand again, or another plan took over from the one that closed it)
+        self.closed_put_down_m: float | None = None
+        self.closes = 0  # times a plan closed the gripper
         self.releases = 0  # times a plan opened the gripper at one of its stops (an object put down, a handle let go)
         self.max_joint_limit_violation = 0.0  # measured joint positions past [q_min, q_max] [rad]
         self.max_reference_limit_excess = 0.0  # commanded (reference) positions past them [rad]: should stay 0
@@ -270,6 +284,7 @@ class MotionExecutor:
             if plan_q is None:
                 return False
         self.plan, self.points, self.grip, self.rots, self._plan_q = plan, points, grip, rots, plan_q
+        self.closed_put_down_m = None  # what this plan does with a closed hand says nothing of why it closed
         self.latest_points[plan.kind] = (points, self.grip)
         if resync:
             self.event("reference_resynced", max_dev_rad=float(np.max(np.abs(ref_q - q))))
@@ -392,6 +407,8 @@ class MotionExecutor:
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
             self.sim.set_gripper(bool(self.grip[i]))
             self.grasp_tcp_z = float(self.sim.tcp_pos()[2]) if self.grip[i] else None
+            self.closed_put_down_m = put_down_before_release(self.points, self.grip, i) if self.grip[i] else None
+            self.closes += bool(self.grip[i])
             self.releases += not self.grip[i]
             self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
             self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
@@ -408,6 +425,7 @@ class MotionExecutor:
     def _drop_plan(self) -> None:
         """Forget the current plan and its waypoints (no waypoint active)."""
         self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
+        self.closed_put_down_m = None
         self.rots = np.zeros((0, 3, 3))
         self.index = -1
 
@@ -451,23 +469,10 @@ class MotionExecutor:
         self.controller.reset(self.dyn, self._last_tau)
         self.event("reference_resynced", reason=reason)
 
-    def put_down_ahead_m(self) -> float | None:
-        """How far the active plan lowers the hand before its next release [m]: the highest of the TCP and the plan's
-        points from the active one to the release, less the release point's height. None when no plan is active or
-        it opens the gripper nowhere ahead (it carries the closed hand to its end)."""
-        if self.phase not in ("move", "settle") or self.index < 0:
-            return None
-        ahead = np.flatnonzero(~self.grip[self.index:])
-        if ahead.size == 0:
-            return None
-        release = self.index + int(ahead[0])
-        top = max(float(self.sim.tcp_pos()[2]), float(self.points[self.index:release + 1, 2].max()))
-        return top - float(self.points[release, 2])
-
     def open_empty_gripper(self, opening_m: float) -> None:
         """The closed gripper holds nothing (its fingers met): open it, so the next plan starts from an open hand."""
         self.sim.set_gripper(False)
-        self.grasp_tcp_z = None
+        self.grasp_tcp_z = self.closed_put_down_m = None
         self.event("gripper", closed=False, reason="grasp_empty", opening_m=round(opening_m, 5))
         self.phase = "done"  # the plan's remaining stops assumed an object in the hand; a new plan follows
 

@@ -20,8 +20,10 @@ plan from the open hand follows at once, reason ``grasp_empty``, also inside the
 proprioception is the gripper command, and with the gripper still closed its local plans carry the missing object
 on. Only once the hand has lifted ``empty_grasp_lift_m`` above where it closed: plans close an empty hand on purpose
 too (a knob turned, a drawer or door pushed with closed fingers: the LIBERO Panda's fingers then measure as little
-as on nothing), and those motions keep low. Non-privileged: the finger joints' measured positions and the TCP
-height from the arm's own kinematics.
+as on nothing), and those motions keep low; and not while the plan that closed the hand carries it on and opens it
+again without putting anything down (``empty_grasp_put_down_m``: the closed hand carried on purpose from a knob to
+the next grasp). Non-privileged: the finger joints' measured positions, the TCP height from the arm's own
+kinematics, and the plan.
 
 A retry from home (``home_retries``): before any plan has released anything, when a global plan has been carried
 out with the hand open and the task is judged not done, or an empty grasp reopened the hand, the arm goes back to the
@@ -92,13 +94,16 @@ class SupervisorConfig:
     empty_grasp_lift_m: how far above the point where it closed the hand must be for an empty gripper to count as
                        a missed or lost object [m]. Down: reacts sooner after a miss, but may reopen a closed hand
                        that turns a knob or pushes a door; up: later.
-    empty_grasp_put_down_m: a closed empty hand that lifted counts as a missed or lost object only when its plan
-                       lowers the hand at least this much [m] before the plan's next release, or never releases: a
-                       plan that opens the hand in the air closed it empty on purpose (the oracle's commanded path
-                       turns the stove knob with closed fingers, then carries the closed hand up and over to the next
-                       grasp before opening it; docs/libero-planner.md, "Empty grasps"). None: every closed empty
-                       hand that lifted counts (the check before stop 42). Up: fewer reopenings of a hand that puts
-                       a missing object down.
+    empty_grasp_put_down_m: while the plan that closed the gripper is still carrying it out, a closed empty hand
+                       that lifted counts as a missed or lost object only when that plan lowers the hand at least this
+                       much [m] over its closed stretch before it opens it again (it puts something down), or never
+                       opens it: a plan that opens the hand in the air closed it empty on purpose (the oracle's
+                       commanded path turns the stove knob with closed fingers, then carries the closed hand up and
+                       over to the next grasp before opening it; docs/libero-planner.md, "Empty grasps"). Once
+                       another plan has taken over, every lifted empty hand counts. None: every closed empty hand
+                       that lifted counts (the check before stop 42). Up: more plans' empty hands left closed (a lost
+                       object whose plan puts it down less than this is noticed only at the release); down: more
+                       hands closed on purpose are reopened.
     home_retries:      glsr only: how many times an episode the arm may go home and plan globally again (see the
                        module doc), or "auto": HOME_RETRIES_LIBERO on LIBERO (by measurement on development layouts:
                        docs/libero-planner.md, "Retries from home"), 0 on the workcell (its reporting tables were
@@ -138,7 +143,7 @@ class SupervisorConfig:
         require_int("supervisor.empty_grasp_steps", self.empty_grasp_steps, minimum=1)
         require_positive("supervisor.empty_grasp_lift_m", self.empty_grasp_lift_m)
         if self.empty_grasp_put_down_m is not None:
-            require_positive("supervisor.empty_grasp_put_down_m", self.empty_grasp_put_down_m)
+            require_positive("supervisor.empty_grasp_put_down_m (or null: off)", self.empty_grasp_put_down_m)
         if isinstance(self.home_retries, str):
             require_choice("supervisor.home_retries", self.home_retries, ("auto",))
         else:
@@ -182,7 +187,7 @@ class Supervisor:
                                                                   and world_kind == "libero")
         self.check_empty_grasp = config.empty_grasp == "on" or (config.empty_grasp == "auto" and world_kind == "libero")
         self._empty_steps = 0  # consecutive planner steps with a closed, empty, lifted gripper
-        self._empty_planned_at: float | None = None  # where the hand closed that a plan carries empty on purpose
+        self._empty_planned_for = 0  # executor.closes of the grasp last found closed empty on purpose
         retries = config.home_retries
         if retries == "auto":
             retries = HOME_RETRIES_LIBERO if world_kind == "libero" else 0
@@ -352,8 +357,9 @@ class Supervisor:
         """The measured finger opening [m] once the closed gripper has measured empty for ``empty_grasp_steps`` steps
         while the hand is at least ``empty_grasp_lift_m`` above where a plan closed it, else None: a pick lifts what it
         holds, while a knob turned or a drawer or door pushed with closed fingers (an empty hand on purpose) keeps
-        low. And only while the plan puts something down before it next opens the hand (``empty_grasp_put_down_m``):
-        a plan that opens it in the air meant the hand empty (event ``empty_hand_planned``, once a grasp)."""
+        low. Not while the plan that closed the hand is still carrying it out and opens it again without putting
+        anything down (``empty_grasp_put_down_m``): it meant the hand empty (event ``empty_hand_planned``, once a
+        grasp). A plan that never opens it, or any plan after the one that closed it, is not asked."""
         sim = executor.sim
         closed_at = executor.grasp_tcp_z
         opening = sim.gripper_opening_m()
@@ -363,13 +369,13 @@ class Supervisor:
         if self._empty_steps < self.cfg.empty_grasp_steps:
             return None
         self._empty_steps = 0
-        if self.cfg.empty_grasp_put_down_m is not None:
-            put_down = executor.put_down_ahead_m()
-            if put_down is not None and put_down < self.cfg.empty_grasp_put_down_m:
-                if self._empty_planned_at != closed_at:
-                    self._empty_planned_at = closed_at
-                    executor.event("empty_hand_planned", opening_m=round(opening, 5), put_down_m=round(put_down, 4))
-                return None
+        put_down = executor.closed_put_down_m
+        if self.cfg.empty_grasp_put_down_m is not None and put_down is not None \
+                and put_down < self.cfg.empty_grasp_put_down_m:
+            if self._empty_planned_for != executor.closes:
+                self._empty_planned_for = executor.closes
+                executor.event("empty_hand_planned", opening_m=round(opening, 5), put_down_m=round(put_down, 4))
+            return None
         return opening
 
     def _geometric_reason(self, executor) -> str | None:

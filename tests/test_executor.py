@@ -299,3 +299,18 @@ def test_a_release_at_the_first_point_counts_from_the_gripper_command_before_the
     np.testing.assert_allclose(out[-1], pts[-1] + [0, 0, 0.05])
     with pytest.raises(ConfigError, match="release_retreat_m"):
         ExecutorConfig(release_retreat_m=0.0)
+
+
+@pytest.mark.parametrize("z, grip, closed_at, expect", [
+    ([0.90, 0.95, 1.00, 0.96, 0.96], [0, 1, 1, 1, 0], 1, 0.04),  # lift to 1.00, put down at 0.96
+    ([0.90, 0.92, 1.05, 1.05, 1.00], [0, 1, 1, 0, 0], 1, 0.0),  # opened at the top: in the air
+    ([0.90, 0.92, 1.05, 1.01, 1.02], [0, 1, 1, 1, 1], 1, None),  # never opened again
+    ([1.00, 0.90, 0.95, 0.93], [1, 1, 0, 0], 0, 0.05),  # closed at the first point, released at the third
+    ([0.90, 1.00, 0.97, 0.90, 0.90], [0, 1, 1, 0, 1], 1, 0.10),  # only up to the first release
+])
+def test_put_down_before_release_measures_the_closed_stretch(z, grip, closed_at, expect):
+    from tcot_hybrid.executor import put_down_before_release
+
+    points = np.column_stack([np.zeros(len(z)), np.zeros(len(z)), z])
+    got = put_down_before_release(points, np.array(grip, bool), closed_at)
+    assert got == pytest.approx(expect) if expect is not None else got is None

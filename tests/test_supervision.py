@@ -263,10 +263,8 @@ class GripperSim:
 class GripperExecutor(FakeExecutor):
     def __init__(self, openings, put_down=None):
         self.sim, self.opened, self.events = GripperSim(openings), [], []
-        self.put_down = put_down  # how far the plan lowers the hand before its next release (None: it never opens)
-
-    def put_down_ahead_m(self):
-        return self.put_down
+        # how far the plan that closed the hand lowers it before it opens it again (None: never, or another plan)
+        self.closed_put_down_m, self.closes = put_down, 1
 
     def event(self, kind, **info):
         self.events.append({"kind": kind, **info})
@@ -348,6 +346,7 @@ def test_an_empty_hand_that_keeps_low_is_left_alone_and_a_lost_object_is_noticed
     (0.10, 0.03, [4]),  # it lowers 10 cm to open: it puts the missing object down
     (0.0, 0.03, []),  # it opens in the air: the hand was closed empty on purpose
     (0.02, 0.03, []),
+    (0.03, 0.03, [4]),  # exactly the setting: a put-down
     (0.0, None, [4]),  # the check before stop 42: every lifted empty hand counts
 ])
 def test_a_plan_that_opens_the_lifted_empty_hand_in_the_air_meant_it_empty(put_down, setting, reopened):
@@ -368,6 +367,33 @@ def test_a_plan_that_opens_the_lifted_empty_hand_in_the_air_meant_it_empty(put_d
     assert len(planned) == (0 if reopened else 1)  # once a grasp, not every step
     if planned:
         assert planned[0]["put_down_m"] == put_down and ex.opened == []
+
+
+def test_a_closed_hand_on_purpose_is_reported_once_a_grasp_and_another_plan_is_not_exempt():
+    ex = GripperExecutor([0.0012], put_down=0.0)
+    ex.sim.heights = (0.90, 0.95)
+    sup = Supervisor(SupervisorConfig(mode="glsr", t_f="plan", empty_grasp="on", confirm_success="off"),
+                     FakePlanner(0.1))
+    reopened = []
+    for t in range(30):
+        ex.sim.t = t
+        if t == 10:  # the plan closes the hand a second time, again to open it in the air
+            ex.closes += 1
+        if t == 20:  # another plan takes over the closed hand
+            ex.closed_put_down_m = None
+        d = sup.decide(t, observe=lambda: None, executor=ex)
+        if d.event and d.event.get("reason") == "grasp_empty":
+            reopened.append(t)
+    assert [e["kind"] for e in ex.events] == ["empty_hand_planned"] * 2
+    assert reopened == [22]  # steps 20, 21, 22 empty and not exempt
+
+
+def test_put_down_setting_from_a_config_file():
+    from tcot_hybrid.run_config import from_mapping
+
+    for value in (None, 0.05):
+        cfg = from_mapping(RunConfig, {"task": "goal_cube_on_plate", "supervisor": {"empty_grasp_put_down_m": value}})
+        assert cfg.supervisor.empty_grasp_put_down_m == value
 
 
 @pytest.mark.parametrize("value", [0.0, -0.01, float("nan"), True])

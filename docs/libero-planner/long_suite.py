@@ -70,8 +70,8 @@ CORNER_ROWS = (
 
 
 def _corner_column(ck: str, how: str, mode: str) -> str:
-    return (f"{'corner labels' if ck == CORNER else 'own model before'}"
-            f"{', put-down' if how == PUT_DOWN else ', before' if how == BEFORE else ''}, {mode}")
+    short = {OWN: "own model before", CORNER: "corner labels", FOUR: "four suites"}[ck]
+    return f"{short}{', put-down' if how == PUT_DOWN else ', before' if how == BEFORE else ''}, {mode}"
 
 
 # (checkpoint, executor and stop rule, mode, runs whose libero_10 episodes make the row); each mode's first row is the

@@ -56,9 +56,9 @@ def test_a_closed_hand_carried_from_the_knob_to_the_next_grasp_is_left_closed(pu
     planned = [e for e in result["events"] if e["kind"] == "empty_hand_planned"]
     assert result["success"]
     if reopened:
-        assert result["empty_grasps"] >= 1 and not planned
+        assert result["empty_grasps"] >= 1
     else:
-        assert result["empty_grasps"] == 0 and len(planned) == 1 and planned[0]["put_down_m"] < 0.03
+        assert result["empty_grasps"] == 0 and len(planned) == 1
 
 
 def test_t_f_plan_follows_the_global_plan_until_it_has_been_carried_out():
