@@ -48,21 +48,27 @@ CORNER_COMMANDS = {
     "l10own": f"{L10_FRESH} --modes glsr,global {OWN_CK} {PUT_DOWN_OFF} "
               "(before the put-down rule)",
     "l10corner": f"{L10_FRESH} --modes glsr,global {CORNER_CK} {PUT_DOWN_OFF} (before the put-down rule)",
-    "shipped8_pd": f"{ALL4_FRESH} --modes glsr {SHIPPED}",
-    "l10own_pd": f"{L10_FRESH} --modes glsr {OWN_CK}",
-    "l10corner_pd": f"{L10_FRESH} --modes glsr {CORNER_CK}",
+    "shipped8_pd": f"{ALL4_FRESH} --modes glsr {SHIPPED} (at 455457c: the rule's first version)",
+    "l10own_pd": f"{L10_FRESH} --modes glsr {OWN_CK} (at 455457c: the rule's first version)",
+    "l10corner_pd": f"{L10_FRESH} --modes glsr {CORNER_CK} (at 455457c: the rule's first version)",
+    "l10corner_pd2": f"{L10_FRESH} --modes glsr {CORNER_CK}",
+    "shipped8_pd2": f"{ALL4_FRESH} --modes glsr {SHIPPED}",
 }
 OWN, CORNER, FOUR = ("libero_10's own model before stop 42 (97 points, observed path)",
                      "libero_10's own model on corner labels (97 commanded corner points; shipped at stop 42)",
                      "shipped (four suites, 51 points)")
-BEFORE, PUT_DOWN = "empty-grasp check before the put-down rule", "empty-grasp check with the put-down rule"
+BEFORE, FIRST, PUT_DOWN = ("empty-grasp check before the put-down rule",
+                           "the put-down rule's first version (the plan ahead of the hand, any plan)",
+                           "the put-down rule (the closed stretch of the plan that closed the hand)")
 CORNER_ROWS = (
     (OWN, BEFORE, "glsr", ("l10own",)),
-    (OWN, PUT_DOWN, "glsr", ("l10own_pd",)),
+    (OWN, FIRST, "glsr", ("l10own_pd",)),
     (CORNER, BEFORE, "glsr", ("l10corner",)),
-    (CORNER, PUT_DOWN, "glsr", ("l10corner_pd",)),
+    (CORNER, FIRST, "glsr", ("l10corner_pd",)),
+    (CORNER, PUT_DOWN, "glsr", ("l10corner_pd2",)),
     (FOUR, BEFORE, "glsr", ("shipped8",)),
-    (FOUR, PUT_DOWN, "glsr", ("shipped8_pd",)),
+    (FOUR, FIRST, "glsr", ("shipped8_pd",)),
+    (FOUR, PUT_DOWN, "glsr", ("shipped8_pd2",)),
     (OWN, "-", "global", ("l10own",)),
     (CORNER, "-", "global", ("l10corner",)),
     (FOUR, "-", "global", ("shipped8",)),
@@ -71,7 +77,8 @@ CORNER_ROWS = (
 
 def _corner_column(ck: str, how: str, mode: str) -> str:
     short = {OWN: "own model before", CORNER: "corner labels", FOUR: "four suites"}[ck]
-    return f"{short}{', put-down' if how == PUT_DOWN else ', before' if how == BEFORE else ''}, {mode}"
+    rule = {BEFORE: ", before", FIRST: ", put-down v1", PUT_DOWN: ", put-down"}.get(how, "")
+    return f"{short}{rule}, {mode}"
 
 
 # (checkpoint, executor and stop rule, mode, runs whose libero_10 episodes make the row); each mode's first row is the
