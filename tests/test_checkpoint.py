@@ -219,7 +219,7 @@ def test_metadata_missing_or_malformed_refused(ckpt):
     mp.write_text(json.dumps(stamp_metadata(meta)))
     with pytest.raises(CheckpointError, match="model config"):
         load_checkpoint(ckpt)
-    for key, bad in (("global_spacing", "event"), ("segment_points", "corner")):
+    for key, bad in (("global_spacing", "event"), ("segment_points", "corner"), ("local_path", "command")):
         meta = json.loads(text)
         meta["windows"].update({"global_spacing": "events", "points_per_segment": 6, key: bad})
         mp.write_text(json.dumps(stamp_metadata(meta)))

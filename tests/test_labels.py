@@ -210,3 +210,7 @@ def test_windows_from_checkpoint_metadata():
         windows_from_meta({**old, "L_g": 51.9})
     with pytest.raises(ConfigError, match="global_spacing = 'event' is not valid; choose one of time, events"):
         windows_from_meta({**old, "global_spacing": "event", "points_per_segment": 6})
+    assert windows_from_meta(old).local_path == "observed"  # written before local_path existed
+    assert windows_from_meta({**old, "local_path": "commanded"}).local_path == "commanded"
+    with pytest.raises(ConfigError, match="local_path = 'command' is not valid; choose one of observed, commanded"):
+        windows_from_meta({**old, "local_path": "command"})

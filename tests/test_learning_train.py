@@ -163,7 +163,7 @@ def test_direct_kind_trains(demo_file, tmp_path, camera):
     load_checkpoint(res.checkpoint, robot="panda", camera=camera, kind="direct")
 
 
-def test_commanded_global_labels_come_from_the_recorded_waypoints(demo_file, tmp_path, camera):
+def test_commanded_labels_come_from_the_recorded_waypoints(demo_file, tmp_path, camera):
     import shutil
 
     import h5py
@@ -171,8 +171,11 @@ def test_commanded_global_labels_come_from_the_recorded_waypoints(demo_file, tmp
     vocab = Vocabulary.build(instructions_of(demo_file))
     observed = TrajectoryWindowConfig(global_spacing="events")
     commanded = dataclasses.replace(observed, global_path="commanded")
-    with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*windows.global_path 'commanded'"):
-        load_frames(demo_file, "train", vocab, windows=commanded, max_tokens=24, direct_horizon=3)
+    local = dataclasses.replace(observed, local_path="commanded")
+    for w in (commanded, local):
+        with pytest.raises(DatasetError, match="has no obs/tcp_target_pos .*windows.global_path or windows.local_path "
+                                               "'commanded'"):
+            load_frames(demo_file, "train", vocab, windows=w, max_tokens=24, direct_horizon=3)
     ahead = tmp_path / "ahead.hdf5"
     shutil.copy(demo_file, ahead)
     lead = np.array([0.0, 0.02, 0.0], np.float32)  # the command runs 2 cm ahead of the hand along y
@@ -187,6 +190,11 @@ def test_commanded_global_labels_come_from_the_recorded_waypoints(demo_file, tmp
     assert not torch.allclose(b.g_uv, a.g_uv, atol=0.5)  # pixels through the demo's camera moved with them
     torch.testing.assert_close(b.g_z[same], a.g_z[same])  # a sideways lead leaves the heights
     torch.testing.assert_close(b.l_xyz, a.l_xyz)  # local labels stay the observed path
+    c = load_frames(ahead, "train", vocab, windows=local, max_tokens=24, direct_horizon=3)
+    torch.testing.assert_close(c.l_xyz, a.l_xyz + torch.from_numpy(lead))  # local_path: the same steps, 2 cm ahead
+    torch.testing.assert_close(c.l_z, a.l_z)
+    assert not torch.allclose(c.l_uv, a.l_uv, atol=0.5)
+    torch.testing.assert_close(c.g_xyz, a.g_xyz)  # and the global labels stay observed
 
 
 def test_shift_augmentation_moves_labels_with_pixels(demo_file):

@@ -387,8 +387,8 @@ class DemoFile:
         labels trace (``windows.global_path: commanded``, ``tcot replay --global-path commanded``)."""
         if not self.has(name, TCP_TARGET):
             raise DatasetError(f"{self.path}: {name} has no {TCP_TARGET} (collected before it was recorded), which "
-                               "commanded-path labels trace (windows.global_path 'commanded', --global-path "
-                               "commanded); recollect, or label the observed path")
+                               "commanded-path labels trace (windows.global_path or windows.local_path "
+                               "'commanded', --global-path commanded); recollect, or label the observed path")
         return self.read(name, [TCP_TARGET])[TCP_TARGET]
 
     def image_valid(self, name: str) -> np.ndarray:

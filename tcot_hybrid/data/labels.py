@@ -55,6 +55,8 @@ class TrajectoryWindowConfig:
          executor was driving it to (``obs/tcp_target_pos``). They differ in contact: a knob bar or a door leaf
          holds the hand back while the command goes on past it, and a plan of the observed path stops at the
          bar (a replayed knob push turned it 0.03 rad of the 0.6 it needs; docs/libero-planner.md).
+    local_path: what local labels trace, as ``global_path``. "commanded" gives GLSR's local plans the same
+         push past a contact that the global ones have, where an observed local plan stops at the knob bar.
     points_per_segment: "events" only: points per path piece between gripper switches, at most L_g // 2.
          (L_g // 2) / points_per_segment pieces fit in the future half; the long suite has 4 switches (5
          pieces, the last a short retreat), so with 6 the first four pieces take 24 of the 25 future points
@@ -68,6 +70,7 @@ class TrajectoryWindowConfig:
     global_spacing: str = "time"
     segment_points: str = "length"
     global_path: str = "observed"
+    local_path: str = "observed"
     points_per_segment: int = 6
 
     def __post_init__(self) -> None:
@@ -76,6 +79,7 @@ class TrajectoryWindowConfig:
         require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
         require_choice("segment_points", self.segment_points, SEGMENT_POINTS)
         require_choice("global_path", self.global_path, GLOBAL_PATHS)
+        require_choice("local_path", self.local_path, GLOBAL_PATHS)
         if self.global_spacing == "events" and self.points_per_segment > self.L_g // 2:
             raise ConfigError(f"points_per_segment = {self.points_per_segment} must be <= L_g // 2 = {self.L_g // 2} "
                               "with global_spacing = 'events' (else the first switch falls outside the window)")
@@ -116,7 +120,8 @@ def windows_from_meta(w: dict) -> TrajectoryWindowConfig:
     kw = {k: w[k] for k in required}  # ints are checked (not truncated) by TrajectoryWindowConfig
     # checkpoints written before segment_points existed placed a piece's points by path length
     return TrajectoryWindowConfig(**kw, global_spacing=spacing, segment_points=w.get("segment_points", "length"),
-                                  global_path=w.get("global_path", "observed"))
+                                  global_path=w.get("global_path", "observed"),
+                                  local_path=w.get("local_path", "observed"))
 
 
 def _check_T(T: int) -> None:

@@ -286,9 +286,9 @@ def _check_meta_types(meta: dict, where: str) -> None:
         if not isinstance(w, dict):
             raise bad("windows", "a JSON object")
         for k, v in w.items():
-            if k in ("global_spacing", "segment_points", "global_path"):
+            if k in ("global_spacing", "segment_points", "global_path", "local_path"):
                 choices = {"global_spacing": GLOBAL_SPACINGS, "segment_points": SEGMENT_POINTS,
-                           "global_path": GLOBAL_PATHS}[k]
+                           "global_path": GLOBAL_PATHS, "local_path": GLOBAL_PATHS}[k]
                 if v not in choices:
                     raise CheckpointError(f"{where}: windows.{k} must be one of {', '.join(map(repr, choices))}, "
                                           f"got {short_repr(v)}")

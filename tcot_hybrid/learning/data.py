@@ -225,12 +225,15 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         rows, traj = keep(info, T)
         rows = rows & f.image_valid(name)  # a sample collected without an image is never a training frame
         track = track_from_arrays(arr)
-        gtrack = track
-        if windows.global_path == "commanded":
-            gtrack = commanded_track(track, f.commanded_targets(name), camera)
-        gl, ll = global_labels(gtrack, windows), local_labels(track, windows)
+        ctrack = None
+        if "commanded" in (windows.global_path, windows.local_path):
+            ctrack = commanded_track(track, f.commanded_targets(name), camera)
+        gtrack = ctrack if windows.global_path == "commanded" else track
+        ltrack = ctrack if windows.local_path == "commanded" else track
+        gl, ll = global_labels(gtrack, windows), local_labels(ltrack, windows)
         pos = arr["obs/robot0_eef_pos"].astype(np.float32)
         gpos = gtrack.xyz_m.astype(np.float32)
+        lpos = ltrack.xyz_m.astype(np.float32)
         grip = arr["obs/robot0_gripper_closed"].astype(np.float32)
         ids, _, _ = vocab.encode(info.instruction, max_tokens)
         ahead = np.minimum(np.arange(T) + direct_horizon, T - 1)
@@ -241,7 +244,7 @@ def _read_frames(f, names: list[str], vocab: Vocabulary, *, windows: TrajectoryW
         cols["g"].append((gl.uv_px[r], gl.z_m[r] - zref, gl.gripper_closed[r].astype(np.float32)))
         cols["l"].append((ll.uv_px[r], ll.z_m[r] - zref, ll.gripper_closed[r].astype(np.float32)))
         cols["gx"].append(gpos[gl.indices[r]])
-        cols["lx"].append(pos[ll.indices[r]])
+        cols["lx"].append(lpos[ll.indices[r]])
         rot6 = camera_rot6(camera, quat_wxyz_to_matrix(arr["obs/robot0_eef_quat"]))  # (T, 6)
         cols["gr"].append(rot6[gl.indices[r]])
         cols["lr"].append(rot6[ll.indices[r]])
