@@ -18,6 +18,7 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "long_suite.json"
 SECTION = "libero-long-suite"
 SECTION_CORNER = "libero-long-suite-corner"
+SECTION_LOCAL = "libero-long-suite-localcmd"
 ALL4 = f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20000"
 L10 = "tcot eval --suite libero_10 --planners learned --init sampled --episodes 4 --seed-start 20002"
 SHIPPED = dev_runs.FOUR_SUITE_MODEL  # the rows' "shipped (four suites)"
@@ -54,6 +55,15 @@ CORNER_COMMANDS = {
     "l10corner_pd2": f"{L10_FRESH} --modes glsr {CORNER_CK}",
     "shipped8_pd2": f"{ALL4_FRESH} --modes glsr {SHIPPED}",
 }
+# layouts 20026-20031, fresh again: local plans on the commanded path (stop 43)
+L10_FRESH2 = "tcot eval --suite libero_10 --planners learned --init sampled --episodes 6 --seed-start 20026"
+LOCAL_COMMANDS = {
+    "l10corner_b": f"{L10_FRESH2} --modes glsr,global "
+                   "--checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors",
+    "l10localcmd": f"{L10_FRESH2} --modes glsr,global "
+                   "--checkpoint runs/libero/planner_libero10_localcmd.safetensors",
+}
+LOCALCMD = "the corner model continued with local plans on the commanded path too (not shipped)"
 OWN, CORNER, FOUR = ("libero_10's own model before stop 42 (97 points, observed path)",
                      "libero_10's own model on corner labels (97 commanded corner points; shipped at stop 42)",
                      "shipped (four suites, 51 points)")
@@ -75,8 +85,17 @@ CORNER_ROWS = (
 )
 
 
+LOCAL_ROWS = (
+    (CORNER, PUT_DOWN, "glsr", ("l10corner_b",)),
+    (LOCALCMD, PUT_DOWN, "glsr", ("l10localcmd",)),
+    (CORNER, "-", "global", ("l10corner_b",)),
+    (LOCALCMD, "-", "global", ("l10localcmd",)),
+)
+
+
 def _corner_column(ck: str, how: str, mode: str) -> str:
-    short = {OWN: "own model before", CORNER: "corner labels", FOUR: "four suites"}[ck]
+    short = {OWN: "own model before", CORNER: "corner labels", FOUR: "four suites",
+             LOCALCMD: "commanded local plans"}[ck]
     rule = {BEFORE: ", before", FIRST: ", put-down v1", PUT_DOWN: ", put-down"}.get(how, "")
     return f"{short}{rule}, {mode}"
 
@@ -96,7 +115,7 @@ ROWS = (
 
 
 def gather() -> None:
-    dev_runs.gather_suite([*COMMANDS.items(), *CORNER_COMMANDS.items()], OUT, "libero_10")
+    dev_runs.gather_suite([*COMMANDS.items(), *CORNER_COMMANDS.items(), *LOCAL_COMMANDS.items()], OUT, "libero_10")
 
 
 def _rows() -> list[dict]:
@@ -115,5 +134,10 @@ def corner_lines() -> list[str]:
                f"455457c:tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors > {OWN_FILE}`."])
 
 
+def local_lines() -> list[str]:
+    return (dev_runs.model_table(_rows(), LOCAL_ROWS, "libero_10", first_seed=20026, column=_corner_column)
+            + dev_runs.command_lines("long_suite.py", 2, LOCAL_COMMANDS.items()))
+
+
 if __name__ == "__main__":
-    dev_runs.main(__doc__, gather, {SECTION: lines, SECTION_CORNER: corner_lines})
+    dev_runs.main(__doc__, gather, {SECTION: lines, SECTION_CORNER: corner_lines, SECTION_LOCAL: local_lines})
