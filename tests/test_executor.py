@@ -314,3 +314,51 @@ def test_put_down_before_release_measures_the_closed_stretch(z, grip, closed_at,
     points = np.column_stack([np.zeros(len(z)), np.zeros(len(z)), z])
     got = put_down_before_release(points, np.array(grip, bool), closed_at)
     assert got == pytest.approx(expect) if expect is not None else got is None
+
+
+def _plan(rows):
+    """(points, grip) from rows of (x, y, z, closed)."""
+    a = np.array(rows, float)
+    return a[:, :3], a[:, 3].astype(bool)
+
+
+def test_overshoot_pushes_extends_a_push_past_its_farthest_point():
+    from tcot_hybrid.executor import overshoot_pushes
+
+    # a drawer shut: close in front of it, lower under the handle, push 15 cm along +y, back off upwards
+    points, grip = _plan([(0.0, 0.00, 1.00, 0), (0.0, 0.00, 0.98, 1), (0.0, 0.00, 0.93, 1), (0.0, 0.10, 0.93, 1),
+                          (0.0, 0.15, 0.93, 1), (0.0, 0.15, 0.99, 1), (0.0, 0.15, 0.99, 1)])
+    p, g, src = overshoot_pushes(False, points, grip, overshoot_m=0.04)
+    assert len(p) == len(points) + 1
+    np.testing.assert_allclose(p[5], [0.0, 0.19, 0.93])  # past the farthest point, at its height
+    assert g[5] and list(src) == [0, 1, 2, 3, 4, 4, 5, 6]
+    np.testing.assert_array_equal(np.delete(p, 5, axis=0), points)  # nothing else moves
+
+
+@pytest.mark.parametrize("rows, start_closed", [
+    # a carry: the closed hand lifts before it moves over
+    ([(0.0, 0.0, 0.93, 0), (0.0, 0.0, 0.93, 1), (0.0, 0.0, 1.05, 1), (0.0, 0.2, 1.05, 1), (0.0, 0.2, 0.95, 0)], False),
+    # a grasp whose closed points jitter 3 cm sideways
+    ([(0.0, 0.0, 0.93, 0), (0.0, 0.0, 0.93, 1), (0.02, 0.02, 0.93, 1), (0.0, 0.0, 1.05, 1)], False),
+    # closed before the plan: where it closed is not in it
+    ([(0.0, 0.0, 0.93, 1), (0.0, 0.2, 0.93, 1)], True),
+])
+def test_overshoot_pushes_leaves_carries_jitter_and_earlier_closes(rows, start_closed):
+    from tcot_hybrid.executor import overshoot_pushes
+
+    points, grip = _plan(rows)
+    p, g, src = overshoot_pushes(start_closed, points, grip, overshoot_m=0.04)
+    np.testing.assert_array_equal(p, points)
+    np.testing.assert_array_equal(g, grip)
+    np.testing.assert_array_equal(src, np.arange(len(points)))
+
+
+def test_push_overshoot_is_off_by_default_and_refuses_non_positive_values():
+    from tcot_hybrid.executor import overshoot_pushes
+
+    assert ExecutorConfig().push_overshoot_m is None
+    points, grip = _plan([(0.0, 0.0, 0.93, 0), (0.0, 0.0, 0.93, 1), (0.0, 0.2, 0.93, 1)])
+    assert len(overshoot_pushes(False, points, grip, overshoot_m=None)[0]) == len(points)
+    for bad in (0.0, -0.02):
+        with pytest.raises(ConfigError, match=f"push_overshoot_m.*{bad}"):
+            ExecutorConfig(push_overshoot_m=bad)
