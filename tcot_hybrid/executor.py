@@ -76,14 +76,6 @@ class ExecutorConfig:
                       and stayed in the hand's grip to the time limit; docs/libero-planner.md, "The long suite:
                       its own model, and leaving a release"). Oracle plans already leave straight up. None (YAML
                       null) = off. [m]
-    push_overshoot_m: a plan that closes the gripper and then moves the closed hand sideways, never rising
-                      ``PUSH_MAX_RISE_M`` above where it closed or went lower since (a push: a drawer shut, a knob turned; a carry
-                      lifts first) for at least ``PUSH_MIN_TRAVEL_M`` gets one more point this far past the
-                      push's farthest point, along the push, at that point's height: learned pushes end short
-                      (a bottom drawer's push 5.7 cm short of the oracle's, which itself drives 3 cm past the
-                      closed front; docs/libero-planner.md, "The bottom drawer: a push that stops short").
-                      A part's limit stops what is pushed; the arm waits there (``reach_timeout_s``).
-                      None (YAML null) = off. [m]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
                       the twin is solved from the same seed and taken when it converges where the other missed by
@@ -106,7 +98,6 @@ class ExecutorConfig:
     transit_min_vertical_m: float = 0.02
     switch_min_horizontal_m: float | None = 0.005
     release_retreat_m: float | None = 0.08
-    push_overshoot_m: float | None = None
     hand_twin: bool = True
 
     def __post_init__(self) -> None:
@@ -118,8 +109,6 @@ class ExecutorConfig:
             require_positive("switch_min_horizontal_m (or null: off)", self.switch_min_horizontal_m)
         if self.release_retreat_m is not None:
             require_positive("release_retreat_m (or null: off)", self.release_retreat_m)
-        if self.push_overshoot_m is not None:
-            require_positive("push_overshoot_m (or null: off)", self.push_overshoot_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -187,50 +176,6 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
         return points, grip, source
     above = points[-1] + np.array([0.0, 0.0, lift_m])
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
-
-
-PUSH_MAX_RISE_M = 0.02  # a closed hand that stays this close to where it closed is pushing, not carrying [m]
-PUSH_MIN_TRAVEL_M = 0.04  # sideways travel that makes it a push rather than a grasp's jitter [m]
-
-
-def overshoot_pushes(start_closed: bool, points: np.ndarray, grip: np.ndarray, *, overshoot_m: float | None):
-    """``points`` and ``grip`` with one point inserted ``overshoot_m`` past each push (see
-    ``ExecutorConfig.push_overshoot_m``): after a close switch, the run of points that stay at most
-    ``PUSH_MAX_RISE_M`` above the lowest of the close point and the run so far while the gripper stays closed; when its farthest point lies at least
-    ``PUSH_MIN_TRAVEL_M`` sideways from the close point, the new point follows it, further along the horizontal line
-    from the close point through it, at its height. Also each output point's plan index (the added one takes the
-    farthest point's). A hand closed before the plan (``start_closed``) is not asked: where it closed is not in the
-    plan. Pure function; unchanged arrays when ``overshoot_m`` is None."""
-    points = np.asarray(points, float)
-    grip = np.asarray(grip, bool)
-    source = np.arange(len(points))
-    if overshoot_m is None or not len(points):
-        return points, grip, source
-    prev = np.r_[bool(start_closed), grip[:-1]]
-    out_p, out_g, out_s = [], [], []
-    extra: dict[int, np.ndarray] = {}
-    for c in np.flatnonzero(grip & ~prev):
-        k, low = c + 1, points[c, 2]
-        while k < len(points) and grip[k] and points[k, 2] <= low + PUSH_MAX_RISE_M:
-            low = min(low, points[k, 2])  # a push may go lower first (a drawer front under its handle)
-            k += 1
-        side = points[c + 1:k, :2] - points[c, :2]
-        if not len(side):
-            continue
-        dist = np.linalg.norm(side, axis=1)
-        far = int(np.argmax(dist))
-        if dist[far] < PUSH_MIN_TRAVEL_M:
-            continue
-        tip = points[c + 1 + far].copy()
-        tip[:2] += side[far] / dist[far] * overshoot_m
-        extra[c + 1 + far] = tip
-    if not extra:
-        return points, grip, source
-    for i in range(len(points)):
-        out_p.append(points[i]), out_g.append(grip[i]), out_s.append(i)
-        if i in extra:
-            out_p.append(extra[i]), out_g.append(True), out_s.append(i)
-    return np.array(out_p), np.array(out_g, bool), np.array(out_s)
 
 
 _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a parallel-jaw hand's twin
@@ -325,9 +270,6 @@ class MotionExecutor:
                 self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
                 switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
-            points, grip, pushed = overshoot_pushes(self.sim.gripper_closed_cmd(), points, grip,
-                                                    overshoot_m=cfg.push_overshoot_m)
-            source = source[pushed]
             points, grip, last = retreat_after_release(self.sim.gripper_closed_cmd(), points, grip,
                                                        lift_m=cfg.release_retreat_m)
             retreat = len(last) > len(source)
