@@ -1,6 +1,6 @@
 """The first global plan of an episode, point by point, as the executor will follow it (after lifting, squared
 transits and the retreat from a release): world position [m], gripper, and the hand's approach axis. A diagnostic
-for docs/libero-planner.md ("The bottom drawer: a push that stops short"); nothing is saved.
+for docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); nothing is saved.
 
     MUJOCO_GL=egl .venv/bin/python docs/libero-planner/first_plan.py --task TASK --seed 20026 --planner learned
 """

@@ -1,0 +1,54 @@
+"""One LIBERO episode's goal, traced: every ``--every`` planner steps the hand, the gripper command and the world
+position of each object the task's goal predicates name; at the end each goal predicate's truth. A diagnostic for
+docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); nothing is saved.
+
+    MUJOCO_GL=egl .venv/bin/python docs/libero-planner/goal_trace.py --task TASK --seed 20026 [--planner oracle]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import numpy as np
+
+
+def main() -> None:
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--task", required=True)
+    ap.add_argument("--seed", type=int, required=True)
+    ap.add_argument("--planner", default="learned", choices=("learned", "oracle"))
+    ap.add_argument("--mode", default="global", choices=("global", "glsr"))
+    ap.add_argument("--every", type=int, default=5, help="planner steps between rows")
+    ap.add_argument("--until", type=int, default=200, help="last planner step traced")
+    a = ap.parse_args()
+    cfg = RunConfig(task=a.task, seed=a.seed, robot="auto", init="sampled", planner=a.planner)
+    cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode=a.mode))
+    runner = EpisodeRunner(cfg)
+    scene = runner.stack.task.scene
+    env, m = scene.env, scene.model
+    goals = env.parsed_problem["goal_state"]
+    names = sorted({n for g in goals for n in g[1:] if n in env.objects_dict})
+    bodies = {n: m.body(env.objects_dict[n].root_body).id for n in names}
+    print("| step | hand [m] | gripper | " + " | ".join(f"{n} [m]" for n in names) + " |")
+    print("|---|---|---|" + "---|" * len(names))
+
+    def row(r, step):
+        if step % a.every or step > a.until:
+            return
+        sim = r.stack.sim
+        pos = " | ".join(np.array2string(sim.data.xpos[bodies[n]], precision=3) for n in names)
+        print(f"| {step} | {np.array2string(sim.tcp_pos(), precision=3)} | "
+              f"{'closed' if sim.gripper_closed_cmd() else 'open'} | {pos} |")
+
+    runner.frame_hook = row
+    runner.run()
+    print(f"\nsuccess: {runner.success} after {runner.steps} steps")
+    for g in goals:
+        print(f"- `{' '.join(g)}`: {bool(env._eval_predicate(g))}")
+
+
+if __name__ == "__main__":
+    main()
