@@ -1,5 +1,6 @@
-"""One LIBERO episode's goal, traced: every ``--every`` planner steps the hand, the gripper command and the world
-position of each object the task's goal predicates name; at the end each goal predicate's truth. A diagnostic for
+"""One LIBERO episode's goal, traced: every ``--every`` planner steps the hand, the gripper command, and the world
+position of each object the task's goal predicates name with the bodies it touches; at the end each goal predicate's
+truth. A diagnostic for
 docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); nothing is saved.
 
     MUJOCO_GL=egl .venv/bin/python docs/libero-planner/goal_trace.py --task TASK --seed 20026 [--planner oracle]
@@ -22,6 +23,7 @@ def main() -> None:
     ap.add_argument("--planner", default="learned", choices=("learned", "oracle"))
     ap.add_argument("--mode", default="global", choices=("global", "glsr"))
     ap.add_argument("--every", type=int, default=5, help="planner steps between rows")
+    ap.add_argument("--since", type=int, default=0, help="first planner step traced")
     ap.add_argument("--until", type=int, default=200, help="last planner step traced")
     a = ap.parse_args()
     cfg = RunConfig(task=a.task, seed=a.seed, robot="auto", init="sampled", planner=a.planner)
@@ -32,14 +34,26 @@ def main() -> None:
     goals = env.parsed_problem["goal_state"]
     names = sorted({n for g in goals for n in g[1:] if n in env.objects_dict})
     bodies = {n: m.body(env.objects_dict[n].root_body).id for n in names}
-    print("| step | hand [m] | gripper | " + " | ".join(f"{n} [m]" for n in names) + " |")
+    print("| step | hand [m] | gripper | " + " | ".join(f"{n} [m], touching" for n in names) + " |")
     print("|---|---|---|" + "---|" * len(names))
 
+    def touching(d, body: int) -> str:
+        root = m.body_rootid[body]
+        other = set()
+        for c in d.contact[:d.ncon]:
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            if m.body_rootid[b1] == root and m.body_rootid[b2] != root:
+                other.add(m.body(b2).name)
+            elif m.body_rootid[b2] == root and m.body_rootid[b1] != root:
+                other.add(m.body(b1).name)
+        return ", ".join(sorted(other)) or "-"
+
     def row(r, step):
-        if step % a.every or step > a.until:
+        if step % a.every or not a.since <= step <= a.until:
             return
         sim = r.stack.sim
-        pos = " | ".join(np.array2string(sim.data.xpos[bodies[n]], precision=3) for n in names)
+        pos = " | ".join(f"{np.array2string(sim.data.xpos[bodies[n]], precision=3)}, {touching(sim.data, bodies[n])}"
+                         for n in names)
         print(f"| {step} | {np.array2string(sim.tcp_pos(), precision=3)} | "
               f"{'closed' if sim.gripper_closed_cmd() else 'open'} | {pos} |")
 
