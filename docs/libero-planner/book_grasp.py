@@ -26,6 +26,7 @@ SEEDS = range(20026, 20032)  # development layouts (docs/seeds.md), never the sh
 def run(planner: str, seed: int) -> dict:
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.workers import one_torch_thread
 
     cfg = RunConfig(task=TASK, seed=seed, robot="libero_panda", init="sampled", planner=planner)
     cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode="global"))
@@ -37,7 +38,8 @@ def run(planner: str, seed: int) -> dict:
             seen["grasp"] = [round(float(v), 4) for v in sim.tcp_pos()]
 
     r = EpisodeRunner(cfg, frame_hook=hook)
-    r.run()
+    with one_torch_thread():  # as `tcot run` and the evaluation's workers: an episode can turn on the last bits
+        r.run()
     reflex = next((e for e in r.stack.executor.events if e["kind"] == "tracking_reflex"), None)
     return {"planner": planner, "seed": seed, "success": bool(r.success), "grasp": seen["grasp"],
             "reflex": None if reflex is None else {k: reflex[k] for k in ("t", "joint", "error_rad", "waypoint")}}

@@ -19,6 +19,7 @@ class _Planned(Exception):
 def first_plan(task: str, seed: int, planner: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.workers import one_torch_thread
 
     cfg = RunConfig(task=task, seed=seed, robot="auto", init="sampled", planner=planner)
     cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode="global"))
@@ -29,7 +30,8 @@ def first_plan(task: str, seed: int, planner: str) -> tuple[np.ndarray, np.ndarr
 
     runner = EpisodeRunner(cfg, pre_step_hook=stop)
     try:
-        runner.run()
+        with one_torch_thread():  # as `tcot run` and the evaluation's workers
+            runner.run()
     except _Planned:
         pass
     ex = runner.stack.executor

@@ -16,6 +16,7 @@ import numpy as np
 def main() -> None:
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.workers import one_torch_thread
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", required=True)
@@ -58,7 +59,8 @@ def main() -> None:
               f"{'closed' if sim.gripper_closed_cmd() else 'open'} | {pos} |")
 
     runner.frame_hook = row
-    runner.run()
+    with one_torch_thread():  # as `tcot run` and the evaluation's workers: an episode can turn on the last bits
+        runner.run()
     print(f"\nsuccess: {runner.success} after {runner.steps} steps")
     for g in goals:
         print(f"- `{' '.join(g)}`: {bool(env._eval_predicate(g))}")
