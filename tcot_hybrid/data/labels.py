@@ -31,6 +31,10 @@ from tcot_hybrid.errors import ConfigError, DatasetError
 GLOBAL_SPACINGS = ("time", "events")
 SEGMENT_POINTS = ("length", "corners")
 GLOBAL_PATHS = ("observed", "commanded")
+# TrajectoryWindowConfig's fields that take one of a set of names, and those names (the config and a checkpoint's
+# metadata check against the same sets)
+WINDOW_CHOICES = {"global_spacing": GLOBAL_SPACINGS, "segment_points": SEGMENT_POINTS, "global_path": GLOBAL_PATHS,
+                  "local_path": GLOBAL_PATHS}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,10 +80,8 @@ class TrajectoryWindowConfig:
     def __post_init__(self) -> None:
         for name in ("L_g", "n_g", "L_l", "n_l", "points_per_segment"):
             require_int(name, getattr(self, name), minimum=1)
-        require_choice("global_spacing", self.global_spacing, GLOBAL_SPACINGS)
-        require_choice("segment_points", self.segment_points, SEGMENT_POINTS)
-        require_choice("global_path", self.global_path, GLOBAL_PATHS)
-        require_choice("local_path", self.local_path, GLOBAL_PATHS)
+        for name, choices in WINDOW_CHOICES.items():
+            require_choice(name, getattr(self, name), choices)
         if self.global_spacing == "events" and self.points_per_segment > self.L_g // 2:
             raise ConfigError(f"points_per_segment = {self.points_per_segment} must be <= L_g // 2 = {self.L_g // 2} "
                               "with global_spacing = 'events' (else the first switch falls outside the window)")
@@ -357,6 +359,6 @@ def window_labels(track: Track, cfg: TrajectoryWindowConfig = TrajectoryWindowCo
     return global_labels(track, cfg), local_labels(track, cfg)
 
 
-__all__ = ["GLOBAL_PATHS", "GLOBAL_SPACINGS", "SEGMENT_POINTS", "commanded_track", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
+__all__ = ["GLOBAL_PATHS", "GLOBAL_SPACINGS", "SEGMENT_POINTS", "WINDOW_CHOICES", "commanded_track", "Track", "TrajectoryWindowConfig", "WindowLabels", "event_index_table", "global_index_table", "global_indices",
            "global_labels", "local_index_table", "local_indices", "local_labels", "make_track",
            "track_from_arrays", "window_labels", "windows_from_meta"]

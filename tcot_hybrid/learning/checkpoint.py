@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tcot_hybrid.errors import CheckpointError, ConfigError, short_repr
-from tcot_hybrid.data.labels import GLOBAL_PATHS, GLOBAL_SPACINGS, SEGMENT_POINTS
+from tcot_hybrid.data.labels import WINDOW_CHOICES
 from tcot_hybrid.jsonio import json_default as _json_default
 
 FORMAT = "tcot-planner-v1"
@@ -286,9 +286,8 @@ def _check_meta_types(meta: dict, where: str) -> None:
         if not isinstance(w, dict):
             raise bad("windows", "a JSON object")
         for k, v in w.items():
-            if k in ("global_spacing", "segment_points", "global_path", "local_path"):
-                choices = {"global_spacing": GLOBAL_SPACINGS, "segment_points": SEGMENT_POINTS,
-                           "global_path": GLOBAL_PATHS, "local_path": GLOBAL_PATHS}[k]
+            choices = WINDOW_CHOICES.get(k)
+            if choices is not None:
                 if v not in choices:
                     raise CheckpointError(f"{where}: windows.{k} must be one of {', '.join(map(repr, choices))}, "
                                           f"got {short_repr(v)}")
