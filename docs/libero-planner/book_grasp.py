@@ -9,13 +9,14 @@ from the oracle's (which grasps the book at its centre) is the network's grasp e
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "book_grasp.json"
@@ -25,11 +26,9 @@ SEEDS = range(20026, 20032)  # development layouts (docs/seeds.md), never the sh
 
 def run(planner: str, seed: int) -> dict:
     from tcot_hybrid.episode import EpisodeRunner
-    from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.workers import one_torch_thread
 
-    cfg = RunConfig(task=TASK, seed=seed, robot="libero_panda", init="sampled", planner=planner)
-    cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode="global"))
+    cfg = dev_runs.episode_config(TASK, seed, planner)
     seen = {"grasp": None}
 
     def hook(runner, step):  # the hand where the gripper was first commanded closed

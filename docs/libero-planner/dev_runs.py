@@ -16,6 +16,16 @@ S4 = ",".join(SUITES)
 FOUR_SUITE_MODEL = "--checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors"
 
 
+def episode_config(task: str, seed: int, planner: str, mode: str = "global"):
+    """The run configuration of one development episode as `tcot run --robot auto --init sampled` makes it (the
+    diagnostics book_grasp.py, first_plan.py and goal_trace.py run single episodes in their own processes)."""
+    from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.supervision import SupervisorConfig
+
+    return RunConfig(task=task, seed=seed, robot="auto", init="sampled", planner=planner,
+                     supervisor=SupervisorConfig(mode=mode))
+
+
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:
     """For each (run directory under runs/dev, the command that makes it): ``row(run, episode)`` of every episode
     (None leaves one out), written to ``out``; a missing run keeps the rows ``out`` already holds for it (runs/ does

@@ -7,9 +7,10 @@ for docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); noth
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 
 class _Planned(Exception):
@@ -18,11 +19,9 @@ class _Planned(Exception):
 
 def first_plan(task: str, seed: int, planner: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from tcot_hybrid.episode import EpisodeRunner
-    from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.workers import one_torch_thread
 
-    cfg = RunConfig(task=task, seed=seed, robot="auto", init="sampled", planner=planner)
-    cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode="global"))
+    cfg = dev_runs.episode_config(task, seed, planner)
 
     def stop(runner, step):
         if step == 1:

@@ -8,14 +8,14 @@ docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); nothing 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 
 def main() -> None:
     from tcot_hybrid.episode import EpisodeRunner
-    from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.workers import one_torch_thread
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -27,9 +27,7 @@ def main() -> None:
     ap.add_argument("--since", type=int, default=0, help="first planner step traced")
     ap.add_argument("--until", type=int, default=200, help="last planner step traced")
     a = ap.parse_args()
-    cfg = RunConfig(task=a.task, seed=a.seed, robot="auto", init="sampled", planner=a.planner)
-    cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, mode=a.mode))
-    runner = EpisodeRunner(cfg)
+    runner = EpisodeRunner(dev_runs.episode_config(a.task, a.seed, a.planner, a.mode))
     scene = runner.stack.task.scene
     env, m = scene.env, scene.model
     goals = env.parsed_problem["goal_state"]
