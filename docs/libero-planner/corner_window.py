@@ -1,8 +1,9 @@
 """Whether a 97-point window of the commanded path, each piece's points at its corners, replaces the shipped
 checkpoint (docs/libero-planner.md, "A longer global window"), on sampled development layouts (docs/seeds.md: seeds
 20000+, never the shipped init states, never 90000+): v4 (examples/configs/train_libero_v4.yaml, the first 1000
-demos) and v5 (train_libero_v5.yaml, all 2000). Each trial's checkpoints run at the same commit on the same machine,
-so its baseline is not an older run's:
+demos) and v5 (train_libero_v5.yaml, all 2000), both continued from the shipped weights, and v9
+(train_libero_v9.yaml, the same labels from nothing). Each trial's checkpoints run on the same machine at commits whose
+episodes run alike, so its baseline is not an older model's run:
 
     .venv/bin/python docs/libero-planner/corner_window.py --gather   # runs/dev/* -> corner_window.json
     .venv/bin/python docs/libero-planner/corner_window.py            # corner_window.json -> docs/libero-planner.md
@@ -17,24 +18,29 @@ import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "corner_window.json"
-EVAL = (f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start 20000 "
+EVAL = (f"tcot eval --suite {dev_runs.S4} --planners learned --init sampled --episodes 2 --seed-start {{seed}} "
         "--modes glsr,global")
-SHIPPED = f"{EVAL} {dev_runs.FOUR_SUITE_MODEL}"
 SHIPPED_LABEL = "shipped (51 points, observed path)"
-# section -> (baseline run, candidate run, candidate's label, candidate's command): each trial's rows, the shipped
-# checkpoint's first (the baseline of each mode)
+SAME_COMMIT = "both checkpoints at the same commit"
+# section -> (first of the two layouts, baseline run, candidate run, candidate's label, candidate's checkpoint, where
+# the runs ran): each trial's rows, the shipped checkpoint's first (the baseline of each mode)
 TRIALS = {
-    "libero-corner-window": ("shipped4", "v4", "v4 (97 corner points, commanded path)",
-                             f"{EVAL} --checkpoint runs/libero/planner_v4.safetensors"),
-    "libero-corner-window-v5": ("shipped5", "v5", "v5 (97 corner points, commanded path, 2000 demos)",
-                                f"{EVAL} --checkpoint runs/libero/planner_v5.safetensors"),
+    "libero-corner-window": (20000, "shipped4", "v4", "v4 (97 corner points, commanded path)",
+                             "runs/libero/planner_v4.safetensors", SAME_COMMIT),
+    "libero-corner-window-v5": (20000, "shipped5", "v5", "v5 (97 corner points, commanded path, 2000 demos)",
+                                "runs/libero/planner_v5.safetensors", SAME_COMMIT),
+    "libero-corner-window-v9": (20022, "shipped9", "v9", "v9 (97 corner points, commanded path, from nothing)",
+                                "runs/libero/planner_v9.safetensors",
+                                "the shipped checkpoint at 28817e1 (stop 43's baseline run), v9 at d9d1e0a: between "
+                                "them only training code, the checkpoint metadata check and docs changed"),
 }
 
 
 def trial_runs(section: str) -> tuple:
     """(run, mode, checkpoint label, command) of one trial, the shipped checkpoint's rows first."""
-    base, run, label, cmd = TRIALS[section]
-    return dev_runs.per_mode(((base, SHIPPED_LABEL, SHIPPED), (run, label, cmd)))
+    seed, base, run, label, checkpoint, _ = TRIALS[section]
+    return dev_runs.per_mode(((base, SHIPPED_LABEL, f"{EVAL.format(seed=seed)} {dev_runs.FOUR_SUITE_MODEL}"),
+                              (run, label, f"{EVAL.format(seed=seed)} --checkpoint {checkpoint}")))
 
 
 KEEP = ("task", "suite", "mode", "seed", "success")
@@ -58,10 +64,11 @@ def changed_tasks(rows: list[dict], mode: str, base: str, run: str) -> str:
 
 def lines(section: str) -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    base, run, _, _ = TRIALS[section]
+    seed, base, run, _, _, where = TRIALS[section]
     runs = trial_runs(section)
-    return (["Sampled development layouts 20000-20001, all 40 tasks, both checkpoints at the same commit (successes / "
-             "episodes; won and lost against the shipped checkpoint in the same mode on the same layouts):", ""]
+    rows = [r for r in rows if r["run"] in (base, run)]
+    return ([f"Sampled development layouts {seed}-{seed + 1}, all 40 tasks, {where} (successes / episodes; won and "
+             "lost against the shipped checkpoint in the same mode on the same layouts):", ""]
             + dev_runs.checkpoint_table(rows, runs)
             + ["", changed_tasks(rows, "global", base, run), "", changed_tasks(rows, "glsr", base, run)]
             + dev_runs.command_lines("corner_window.py", 2, dict((n, c) for n, _, _, c in runs).items()))

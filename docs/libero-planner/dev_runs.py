@@ -16,14 +16,15 @@ S4 = ",".join(SUITES)
 FOUR_SUITE_MODEL = "--checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors"
 
 
-def episode_config(task: str, seed: int, planner: str, mode: str = "global"):
+def episode_config(task: str, seed: int, planner: str, mode: str = "global", checkpoint: str | None = None):
     """The run configuration of one development episode as `tcot run --robot auto --init sampled` makes it (the
-    diagnostics book_grasp.py, first_plan.py and goal_trace.py run single episodes in their own processes)."""
+    diagnostics book_grasp.py, first_plan.py and goal_trace.py run single episodes in their own processes); ``checkpoint``
+    as `--checkpoint` (None: the task's shipped model)."""
     from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.supervision import SupervisorConfig
 
     return RunConfig(task=task, seed=seed, robot="auto", init="sampled", planner=planner,
-                     supervisor=SupervisorConfig(mode=mode))
+                     supervisor=SupervisorConfig(mode=mode), checkpoint=checkpoint)
 
 
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:

@@ -17,11 +17,12 @@ class _Planned(Exception):
     """Raised once the step-0 plan is adopted: the probe needs nothing after it."""
 
 
-def first_plan(task: str, seed: int, planner: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def first_plan(task: str, seed: int, planner: str, checkpoint: str | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.workers import one_torch_thread
 
-    cfg = dev_runs.episode_config(task, seed, planner)
+    cfg = dev_runs.episode_config(task, seed, planner, checkpoint=checkpoint)
 
     def stop(runner, step):
         if step == 1:
@@ -42,8 +43,9 @@ def main() -> None:
     ap.add_argument("--task", required=True)
     ap.add_argument("--seed", type=int, required=True)
     ap.add_argument("--planner", default="learned", choices=("learned", "oracle"))
+    ap.add_argument("--checkpoint", help="the learned planner's checkpoint (default: the task's shipped model)")
     a = ap.parse_args()
-    points, grip, approach = first_plan(a.task, a.seed, a.planner)
+    points, grip, approach = first_plan(a.task, a.seed, a.planner, a.checkpoint)
     print("| point | x [m] | y [m] | z [m] | gripper | approach axis |")
     print("|---|---|---|---|---|---|")
     for i, (p, g, z) in enumerate(zip(points, grip, approach)):
