@@ -39,8 +39,9 @@ TRIALS = {
 def trial_runs(section: str) -> tuple:
     """(run, mode, checkpoint label, command) of one trial, the shipped checkpoint's rows first."""
     seed, base, run, label, checkpoint, _ = TRIALS[section]
-    return dev_runs.per_mode(((base, SHIPPED_LABEL, f"{EVAL.format(seed=seed)} {dev_runs.FOUR_SUITE_MODEL}"),
-                              (run, label, f"{EVAL.format(seed=seed)} --checkpoint {checkpoint}")))
+    cmd = EVAL.format(seed=seed)
+    return dev_runs.per_mode(((base, SHIPPED_LABEL, f"{cmd} {dev_runs.FOUR_SUITE_MODEL}"),
+                              (run, label, f"{cmd} --checkpoint {checkpoint}")))
 
 
 KEEP = ("task", "suite", "mode", "seed", "success")
@@ -66,7 +67,6 @@ def lines(section: str) -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
     seed, base, run, _, _, where = TRIALS[section]
     runs = trial_runs(section)
-    rows = [r for r in rows if r["run"] in (base, run)]
     return ([f"Sampled development layouts {seed}-{seed + 1}, all 40 tasks, {where} (successes / episodes; won and "
              "lost against the shipped checkpoint in the same mode on the same layouts):", ""]
             + dev_runs.checkpoint_table(rows, runs)

@@ -20,9 +20,11 @@ def episode_config(task: str, seed: int, planner: str, mode: str = "global", che
     """The run configuration of one development episode as `tcot run --robot auto --init sampled` makes it (the
     diagnostics book_grasp.py, first_plan.py and goal_trace.py run single episodes in their own processes); ``checkpoint``
     as `--checkpoint` (None: the task's shipped model)."""
+    from tcot_hybrid.planners import check_checkpoint_used
     from tcot_hybrid.run_config import RunConfig
     from tcot_hybrid.supervision import SupervisorConfig
 
+    check_checkpoint_used(checkpoint, [planner])  # as `tcot run`: the oracle would ignore it
     return RunConfig(task=task, seed=seed, robot="auto", init="sampled", planner=planner,
                      supervisor=SupervisorConfig(mode=mode), checkpoint=checkpoint)
 
