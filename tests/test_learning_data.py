@@ -8,7 +8,7 @@ from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.data.dataset import env_difference, open_demos
 from tcot_hybrid.data.labels import TrajectoryWindowConfig
 from tcot_hybrid.errors import ConfigError, DatasetError
-from tcot_hybrid.learning.data import camera_rot6, height_reference, load_frames, quat_wxyz_to_matrix
+from tcot_hybrid.learning.data import camera_rot6, height_reference, load_frames, quat_wxyz_to_matrix, tasks_of
 from tcot_hybrid.learning.model import rot6_to_matrix
 from tcot_hybrid.learning.validation import lift_frames
 from tcot_hybrid.learning.vocab import Vocabulary
@@ -123,3 +123,16 @@ def test_suites_keep_only_their_demos_and_a_missing_suite_is_named(tmp_path, cam
     assert sorted(load_frames(path, "all", VOCAB, suites=("libero_10", "libero_goal"), **KW).demos) == sorted(every.demos)
     with pytest.raises(DatasetError, match=r"\['libero_spatial'\].*\['libero_10', 'libero_goal'\]"):
         load_frames(path, "train", VOCAB, suites=("libero_spatial",), **KW)
+
+
+def test_exclude_tasks_leaves_out_only_their_demos(tmp_path, camera):
+    path = tmp_path / "two_tasks.hdf5"
+    make_demo_file(path, camera, seeds=range(12), episode=lambda s: {"task": "libero_object:ketchup" if s % 3 else
+                                                                      "libero_object:milk"})
+    assert tasks_of(path) == {"libero_object:ketchup", "libero_object:milk"}
+    every = load_frames(path, "all", VOCAB, **KW)
+    kept = load_frames(path, "all", VOCAB, exclude_tasks=frozenset({"libero_object:ketchup"}), **KW)
+    with open_demos(path) as f:
+        want = sorted(n for n in f.mask("train") + f.mask("valid") if f.info(n).task == "libero_object:milk")
+    assert sorted(kept.demos) == want and 0 < len(want) < len(every.demos)
+    assert sorted(load_frames(path, "all", VOCAB, exclude_tasks=frozenset({"other"}), **KW).demos) == sorted(every.demos)

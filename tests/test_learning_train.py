@@ -326,6 +326,11 @@ def test_a_bare_string_for_a_list_field_is_refused(name):
         TrainConfig(**{name: "x"})  # would otherwise be read as its letters
 
 
+def test_extra_data_replaces_tasks_needs_extra_data():
+    with pytest.raises(ConfigError, match="extra_data_replaces_tasks needs extra_data"):
+        TrainConfig(extra_data_replaces_tasks=True)
+
+
 def test_cmd_train_missing_data_is_clear(tmp_path):
     with pytest.raises(ConfigError, match="does not exist.*--collect"):
         cmd_train(["--data", str(tmp_path / "none.hdf5"), "--out", str(tmp_path / "x.safetensors")])

@@ -2,7 +2,9 @@
 to look where an object stands: v6 (examples/configs/train_libero_v6.yaml, the shipped checkpoint fine-tuned with the
 spread demos added), v7 (train_libero_v7.yaml, the same data for 8 epochs) and v8 (train_libero_v8.yaml, a third of
 the spread frames) against the shipped checkpoint, and v10 (train_libero_v10.yaml: v6's recipe without the spread
-layouts, the control that tells the new demonstrations' share of the loss from the spread layouts'),
+layouts, the control that tells the new demonstrations' share of the loss from the spread layouts') and v11
+(train_libero_v11.yaml: v10 with the tall objects' demonstrations collected again by an oracle that prefers top
+grasps),
 unperturbed and under `object_moved` and `target_moved`, on sampled development layouts (docs/seeds.md: seeds 20000+,
 never the shipped init states, never 90000+). The checkpoints of a table run at the same commit on the same machine:
 
@@ -27,6 +29,8 @@ V6 = ("v6 (spread layouts added)", "--checkpoint runs/libero/planner_v6.safetens
 V7 = ("v7 (v6's data, 8 epochs)", "--checkpoint runs/libero/planner_v7.safetensors")
 V8 = ("v8 (a third of the spread frames, 12 epochs)", "--checkpoint runs/libero/planner_v8.safetensors")
 V10 = ("v10 (no spread frames, 12 epochs)", "--checkpoint runs/libero/planner_v10.safetensors")
+V11 = ("v11 (v10 with the tall objects' demos collected again, top grasps preferred)",
+       "--checkpoint runs/libero/planner_v11.safetensors")
 # (perturbation, the table's heading, its runs: (run, checkpoint), the shipped checkpoint's first, the first of its
 # two layouts); each table's runs were made at one commit (the overlap check of a moved object's spot came between
 # the two object_moved ones)
@@ -38,6 +42,8 @@ TABLES = (("none", "unperturbed (v6 at a46c51e, v7 at a0ea256: nothing is moved,
           ("none", "unperturbed, layouts 20024-20025 (the shipped checkpoint in stop 44's baseline run at d9d1e0a, v10 at "
            "ae50039: only docs, a diagnostic script's checkpoint check and training configs changed between)",
            (("shipped10", SHIPPED), ("v10", V10)), 20024),
+          ("none", "unperturbed, layouts 20038-20039 (both at 6c3b0f1? (stop 45)",
+           (("shipped11", SHIPPED), ("v11", V11)), 20038),
           ("object_moved", "at a46c51e", (("shipped6_objmoved", SHIPPED), ("v6_objmoved", V6)), 20000),
           ("object_moved", "at a0ea256, a moved object's spot checked to overlap nothing",
            (("shipped7_objmoved", SHIPPED), ("v7_objmoved", V7)), 20000),

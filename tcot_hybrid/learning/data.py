@@ -116,15 +116,16 @@ def file_hash(path: str | Path, *, chunk: int = 1 << 22) -> str:
 def load_frames(path: str | Path, split: str, vocab: Vocabulary, *, windows: TrajectoryWindowConfig,
                 max_tokens: int, direct_horizon: int, max_demos: int | None = None,
                 successful_only: bool = True, frame_stride: int = 1, height_ref: str = "world",
-                suites: tuple[str, ...] = ()) -> FrameSet:
+                suites: tuple[str, ...] = (), exclude_tasks: frozenset[str] = frozenset()) -> FrameSet:
     """Read split ``train``/``valid`` (or ``all``: both) of demo file ``path`` into memory with every label
     computed. Only successful demos carry trajectory labels worth imitating; ``successful_only`` drops the rest.
     ``frame_stride`` keeps every k-th frame of each demo (t = 0 always; labels still come from the whole track).
-    ``suites`` keeps only the demos of those suites (empty: all).
+    ``suites`` keeps only the demos of those suites (empty: all); ``exclude_tasks`` leaves out the demos of those
+    tasks (their demos collected again into another file).
     """
     with open_demos(path) as f:
         names = f.mask("train") + f.mask("valid") if split == "all" else f.mask(split)
-        infos = of_suites(f, [f.info(n) for n in names], suites, path)
+        infos = [i for i in of_suites(f, [f.info(n) for n in names], suites, path) if i.task not in exclude_tasks]
         names = [i.name for i in infos]
         if successful_only:
             names = [i.name for i in infos if i.success]
@@ -294,6 +295,12 @@ def concat_frames(sets: list[FrameSet]) -> FrameSet:
         else:
             out[fld.name] = [x for v in vals for x in v]
     return FrameSet(**out)
+
+
+def tasks_of(path: str | Path) -> frozenset[str]:
+    """The tasks demo file ``path`` holds demos of (either split)."""
+    with open_demos(path) as f:
+        return frozenset(i.task for i in f.infos())
 
 
 def instructions_of(path: str | Path, split: str = "train") -> list[str]:

@@ -128,7 +128,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
 
     from tcot_hybrid.learning.checkpoint import camera_meta, save_checkpoint, versions
     from tcot_hybrid.learning.data import (concat_frames, env_of, file_hash, instructions_of, load_frames,
-                                           load_online_frames, online_split_size)
+                                           load_online_frames, online_split_size, tasks_of)
     from tcot_hybrid.learning.model import PlannerNet, count_parameters
     from tcot_hybrid.learning.vocab import Vocabulary
 
@@ -155,9 +155,12 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
         raise ConfigError(f"planner images must be square, data has {env['width']}x{env['height']}")
     load = dict(windows=cfg.windows, max_tokens=mcfg.max_tokens, direct_horizon=cfg.direct_horizon,
                 height_ref=cfg.height_ref, suites=cfg.suites)
-    tr = load_frames(cfg.data, "train", vocab, max_demos=cfg.max_train_demos, **load)
-    va = load_frames(cfg.data, "valid", vocab, **load)
+    replaced = frozenset().union(*map(tasks_of, cfg.extra_data)) if cfg.extra_data_replaces_tasks else frozenset()
+    tr = load_frames(cfg.data, "train", vocab, max_demos=cfg.max_train_demos, exclude_tasks=replaced, **load)
+    va = load_frames(cfg.data, "valid", vocab, exclude_tasks=replaced, **load)
     of = f" (suites {', '.join(cfg.suites)})" if cfg.suites else ""
+    if replaced:
+        of += f" (without the {len(replaced)} tasks extra_data replaces: {', '.join(sorted(replaced))})"
     log(f"data {cfg.data}{of}: {len(tr.demos)} train demos / {len(tr)} frames, {len(va.demos)} valid demos / "
         f"{len(va)} frames; vocabulary {len(vocab)} words; loaded in {time.perf_counter() - t_start:.1f}s")
     trs, vas = [tr], [va]

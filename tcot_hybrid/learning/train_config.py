@@ -69,6 +69,9 @@ class TrainConfig:
     extra_data:      further demonstration files (``tcot collect`` output, same robot and camera), e.g. more seeds
                      of the tasks a first-plan-at-t = 0 global plan gets wrong most (long, tool); split by seed
                      like ``data`` [paths]
+    extra_data_replaces_tasks: a task with demos in an ``extra_data`` file is left out of ``data`` (both splits): its
+                     demos there were collected again, e.g. after an oracle change (``tcot collect --tasks ...``
+                     into a new file), and ``data`` keeps every other task's.
     extra_frame_stride: keep every k-th frame of an ``extra_data`` demo (every t = 0 frame is kept: k divides 0).
                      Up: less memory; the t = 0 scenes, where frozen global plans are made, stay complete.
     online_data:     further files of online episodes (``tcot collect --planner learned`` rollouts, oracle
@@ -134,6 +137,7 @@ class TrainConfig:
 
     data: str = "data/demos_panda.hdf5"
     extra_data: tuple[str, ...] = ()
+    extra_data_replaces_tasks: bool = False
     extra_frame_stride: int = 1
     online_data: tuple[str, ...] = ()
     online_frame_stride: int = 2
@@ -184,6 +188,8 @@ class TrainConfig:
                 raise ConfigError(f"{name} must be a list of {what}, got the string {value!r} (write [{value}])")
         for name in ("extra_data", "online_data", "suites"):  # YAML gives a list
             object.__setattr__(self, name, tuple(str(p) for p in getattr(self, name)))
+        if self.extra_data_replaces_tasks and not self.extra_data:
+            raise ConfigError("extra_data_replaces_tasks needs extra_data (the files whose tasks replace data's)")
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
         for name in ("global_t0_frac", "recovery_frac"):
