@@ -42,7 +42,8 @@ TABLES = (("none", "unperturbed (v6 at a46c51e, v7 at a0ea256: nothing is moved,
           ("none", "unperturbed, layouts 20024-20025 (the shipped checkpoint in stop 44's baseline run at d9d1e0a, v10 at "
            "ae50039: only docs, a diagnostic script's checkpoint check and training configs changed between)",
            (("shipped10", SHIPPED), ("v10", V10)), 20024),
-          ("none", "unperturbed, layouts 20038-20039 (both at 6c3b0f1? (stop 45)",
+          ("none", "unperturbed, layouts 20038-20039 (the shipped checkpoint at ae50039, v11 at ec73443: between them "
+           "docs, training code and the oracle's side-grasp cost, which a learned episode does not run)",
            (("shipped11", SHIPPED), ("v11", V11)), 20038),
           ("object_moved", "at a46c51e", (("shipped6_objmoved", SHIPPED), ("v6_objmoved", V6)), 20000),
           ("object_moved", "at a0ea256, a moved object's spot checked to overlap nothing",

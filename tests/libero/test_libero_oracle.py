@@ -115,26 +115,6 @@ def test_an_open_region_is_no_cavity():
     assert place._cavity([], ctx.obstacles([], exclude=(place.obj,))) is None
 
 
-@pytest.mark.parametrize("seed", [3, 20024])
-def test_a_tall_object_that_takes_a_top_grasp_is_taken_from_above(seed):
-    # the ketchup bottle's side grasp scored 0.005 below its top grasp: a learned plan taught it fell 3.3 cm short along
-    # the approach and closed the fingers in front of the bottle (docs/libero-planner.md, "The control: the
-    # recollected demonstrations alone"); a side grasp now costs SIDE_GRASP_COST, and the top grasp wins
-    from tcot_hybrid.libero.skills import SIDE_GRASP_COS, SIDE_GRASP_COST, PickPlace
-
-    runner = EpisodeRunner(RunConfig(task="libero_object:pick_up_the_ketchup_and_place_it_in_the_basket", seed=seed,
-                                     init="sampled", planner="oracle"))
-    runner.settle()
-    task = runner.stack.task
-    task.skills()
-    ctx = task._oracle
-    pick = next(s for s in ctx.skills if isinstance(s, PickPlace))
-    best = pick.grasp(ctx.world, [])
-    side = [g for g in pick.last_grasps if -g.rot[2, 2] < SIDE_GRASP_COS]
-    assert -best.rot[2, 2] > SIDE_GRASP_COS and side  # from above, with side grasps to choose from
-    assert side[0].score - best.score < SIDE_GRASP_COST  # won by less than a side grasp costs: the cost decided
-
-
 def test_the_arm_reaches_its_home_but_not_a_point_two_metres_away(microwave):
     import numpy as np
 
