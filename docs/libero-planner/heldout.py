@@ -76,13 +76,15 @@ def _rel(path: str) -> str:
     return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(path)
 
 
-def evaluate(checkpoint: str, data: str, radii: tuple[int, ...]) -> dict:
+def load_validation(checkpoint: str, data: str) -> tuple:
+    """(checkpoint, validation frames of ``data`` labelled with its windows, the windows, the frames training
+    validates on: :func:`val_indices` with its ``val_max_frames``), torch on 2 threads (precision.py shares it)."""
     import torch
 
     from tcot_hybrid.data.labels import windows_from_meta
     from tcot_hybrid.learning.checkpoint import load_checkpoint
     from tcot_hybrid.learning.data import load_frames
-    from tcot_hybrid.learning.validation import predict, trajectory_metrics, val_indices
+    from tcot_hybrid.learning.validation import val_indices
     from tcot_hybrid.learning.vocab import Vocabulary
 
     torch.set_num_threads(2)
@@ -92,8 +94,16 @@ def evaluate(checkpoint: str, data: str, radii: tuple[int, ...]) -> dict:
     frames = load_frames(data, "valid", Vocabulary(tuple(meta["vocabulary"])), windows=win,
                          max_tokens=model.cfg.max_tokens, direct_horizon=int(meta["direct_horizon"]),
                          height_ref=meta.get("height_ref", "world"))
-    ng, c = model.cfg.n_global, win.global_center
     idx = val_indices(frames, int(meta.get("train_config", {}).get("val_max_frames", 2000)))
+    return ck, frames, win, idx
+
+
+def evaluate(checkpoint: str, data: str, radii: tuple[int, ...]) -> dict:
+    from tcot_hybrid.learning.validation import predict, trajectory_metrics
+
+    ck, frames, win, idx = load_validation(checkpoint, data)
+    meta, model = ck.meta, ck.model
+    ng, c = model.cfg.n_global, win.global_center
     traj = idx[frames.traj[idx]]
     suite = np.array([t.split(":")[0] for t in frames.tasks])[frames.demo[traj]]
     t0 = frames.t[traj] == 0

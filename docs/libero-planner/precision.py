@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+import heldout  # this folder's: run as a script, the folder is on sys.path
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 OUT = HERE / "precision.json"
@@ -93,24 +95,12 @@ def shifted_predict(model, frames, rows: np.ndarray, shifts, *, batch: int = 128
 
 
 def measure(checkpoint: str, data: str) -> dict:
-    import torch
+    from tcot_hybrid.learning.validation import lift_frames
 
-    from tcot_hybrid.data.labels import windows_from_meta
-    from tcot_hybrid.learning.checkpoint import load_checkpoint
-    from tcot_hybrid.learning.data import load_frames
-    from tcot_hybrid.learning.validation import lift_frames, val_indices
-    from tcot_hybrid.learning.vocab import Vocabulary
-
-    torch.set_num_threads(2)
-    ck = load_checkpoint(checkpoint)
-    meta, model = ck.meta, ck.model
-    win = windows_from_meta(meta["windows"])
-    fr = load_frames(data, "valid", Vocabulary(tuple(meta["vocabulary"])), windows=win,
-                     max_tokens=model.cfg.max_tokens, direct_horizon=int(meta["direct_horizon"]),
-                     height_ref=meta.get("height_ref", "world"))
+    ck, fr, win, idx = heldout.load_validation(checkpoint, data)
+    model = ck.model
     ng, c = model.cfg.n_global, win.global_center
     cell = model.cfg.image_px / (model.cfg.image_px // 4)
-    idx = val_indices(fr, int(meta.get("train_config", {}).get("val_max_frames", 2000)))
     rows = idx[fr.traj[idx]]
     t, demo = np.asarray(fr.t), np.asarray(fr.demo)
     res: dict = {"checkpoint": _rel(checkpoint), "data": _rel(data), "valid_demos": len(fr.demos),
