@@ -228,7 +228,7 @@ class EpisodeRunner:
                     self._stop_hold = 0  # detector stop (stop_on detector/either) counts its verdicts afresh
             if d.reset:
                 self._reset_scene()
-            if d.plan is not None:  # the supervisor asked the planner already (confirm_success)
+            if d.plan is not None:  # the supervisor made the plan already (confirm_success, a tracked grasp)
                 if ex.set_plan(d.plan):
                     self.plans.append(d.plan)
             elif d.plan_mode is not None:
@@ -383,7 +383,7 @@ class EpisodeRunner:
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
-            "homes": self.supervisor.homes,
+            "homes": self.supervisor.homes, "grasps_tracked": self.supervisor.tracked_moves,
             "camera_calibration": s.planner.calibration.summary() if hasattr(s.planner, "calibration") else None,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),
             "max_reference_limit_excess_rad": float(ex.max_reference_limit_excess),

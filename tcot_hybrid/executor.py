@@ -222,6 +222,7 @@ class MotionExecutor:
         self.points: np.ndarray = np.zeros((0, 3))  # waypoints [m, world]
         self.rots: np.ndarray = np.zeros((0, 3, 3))  # TCP orientation per waypoint [world]
         self.grip: np.ndarray = np.zeros(0, bool)
+        self.point_source: np.ndarray = np.zeros(0, int)  # plan waypoint index of each point
         self.index = -1
         self.phase = "idle"  # idle | move | settle | done
         self._phase_until = 0.0
@@ -265,6 +266,7 @@ class MotionExecutor:
         rots = np.broadcast_to(R_DOWN, (len(plan), 3, 3)) if plan.tcp_rot is None else plan.tcp_rot
         cfg = self.config
         retreat = False
+        source = np.arange(len(plan))
         if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
             points, grip, source = square_transits(
                 self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
@@ -273,7 +275,8 @@ class MotionExecutor:
             points, grip, last = retreat_after_release(self.sim.gripper_closed_cmd(), points, grip,
                                                        lift_m=cfg.release_retreat_m)
             retreat = len(last) > len(source)
-            rots = rots[source[last]]
+            source = source[last]
+            rots = rots[source]
         rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q
@@ -284,6 +287,7 @@ class MotionExecutor:
             if plan_q is None:
                 return False
         self.plan, self.points, self.grip, self.rots, self._plan_q = plan, points, grip, rots, plan_q
+        self.point_source = source  # each point's waypoint index in the plan (corners and a retreat share one)
         self.closed_put_down_m = None  # what this plan does with a closed hand says nothing of why it closed
         self.latest_points[plan.kind] = (points, self.grip)
         if resync:

@@ -42,9 +42,10 @@ network's two outputs on the same observation, nothing from the simulator.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
+from tcot_hybrid.anchors import SwitchTrackConfig
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
@@ -110,6 +111,9 @@ class SupervisorConfig:
                        measured without it). 0: Algorithm 1 as written. Up: more retries of a plan that keeps failing,
                        less time left for local recovery.
     home_lift_m:       how far the hand rises straight up before it turns home [m].
+    track:             glsr modes: watch a frozen global plan's next grasp and release in the planner camera and shift
+                       the plan with the object or the receptacle when it moved (:mod:`tcot_hybrid.anchors`; reasons
+                       ``grasp_tracked``, ``release_tracked``).
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
                        do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
                        on success frames and on the others). Up: overrules fewer verdicts (more false successes
@@ -133,6 +137,7 @@ class SupervisorConfig:
     empty_grasp_put_down_m: float | None = 0.03
     home_retries: int | Literal["auto"] = "auto"
     home_lift_m: float = 0.10
+    track: SwitchTrackConfig = field(default_factory=SwitchTrackConfig)
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
@@ -197,6 +202,10 @@ class Supervisor:
         self.empty_grasps = 0
         self.overruled = 0
         self.t_f = resolve_t_f(config.t_f, world_kind)  # None: the global phase lasts as long as its plan
+        self.track = config.track.enabled(world_kind) and config.mode in ("glsr", "glsr_reset")
+        self._plan_image = None  # the image the global plan being followed was made (or last shifted) from
+        self._anchors: list = []  # its next grasp and release (anchors.SwitchAnchor)
+        self.tracked_moves = 0
         self.state = "start"
         self.resets = 0
         self.replans = 0
@@ -221,6 +230,7 @@ class Supervisor:
         if step == 0:
             self.state = "local_follow" if cfg.mode == "local" else "global_follow"
             mode = "local" if cfg.mode == "local" else "global"
+            self._remember_plan_image(observe)
             return self._plan(step, mode, "start", executor)
         if cfg.mode == "global":
             return Decision(None, False, None)
@@ -232,6 +242,7 @@ class Supervisor:
             if not executor.plan_finished:
                 return Decision(None, False, None)
             self.state, self._global_from = "global_follow", step
+            self._remember_plan_image(observe)
             return self._plan(step, "global", "home_reached", executor)
         opening = self._empty_grasp_opening(executor) if self.check_empty_grasp else None
         if opening is not None:  # before any observation of this step
@@ -246,7 +257,8 @@ class Supervisor:
         frozen = (self.state == "global_follow" and (self.t_f is None or step - self._global_from <= self.t_f)
                   and not executor.plan_finished)
         if frozen and geometric is None:
-            return Decision(None, False, None)
+            tracked = self._track_switches(step, observe, executor) if self.track else None
+            return tracked or Decision(None, False, None)
         p, rejected = self.detect(observe)
         successful = (not rejected) and p >= cfg.success_threshold
         if self.state == "global_follow":
@@ -273,6 +285,53 @@ class Supervisor:
             d = self._plan(step, "local", reason, executor)
             return Decision(d.plan_mode, False, {**d.event, "p_success": round(float(p), 4)})
         return Decision(None, False, self._event(step, p=p))
+
+    def _remember_plan_image(self, observe) -> None:
+        if self.track:  # None for a planner that does not look (nothing to track)
+            self._plan_image = getattr(observe(), "image", None)
+
+    def _track_switches(self, step: int, observe, executor) -> Decision | None:
+        """While a frozen global plan is followed: a look every ``track.every_steps`` steps at whether the object of its
+        next grasp, or the receptacle of the release after it, moved (:func:`tcot_hybrid.anchors.look`), while the
+        hand is still clear of it; once ``track.confirm_looks`` looks in a row agree, the plan is shifted with it
+        (reason ``grasp_tracked`` or ``release_tracked``). None: keep following."""
+        import numpy as np
+
+        from tcot_hybrid.anchors import look, shift_on_plane, shifted_plan, switch_anchors
+
+        tc = self.cfg.track
+        plan = executor.plan
+        if plan is None or plan.kind != "global" or self._plan_image is None or self.tracked_moves >= tc.max_moves:
+            return None
+        if not self._anchors or self._anchors[0].plan is not plan:
+            self._anchors = switch_anchors(plan, executor, self._plan_image)
+        if step % tc.every_steps:
+            return None
+        tcp = executor.sim.tcp_pos()
+        live = [a for a in self._anchors if not a.done(executor) and np.linalg.norm(tcp - a.point_m) >= tc.hand_clear_m]
+        if not live:
+            return None
+        image = observe().image
+        for a in live:
+            seen = look(a.image, image, a.uv_px, tc)
+            if seen is None or not seen.moved:
+                a.candidate, a.seen = None, 0
+                continue
+            same = a.candidate is not None and np.linalg.norm(seen.uv_px - a.candidate) <= 2.0
+            a.candidate, a.seen = seen.uv_px, (a.seen + 1 if same else 1)
+            if a.seen < tc.confirm_looks:
+                continue
+            shift = shift_on_plane(plan.lift_camera(executor.camera), a.point_m, seen.uv_px)
+            start = int(executor.point_source[executor.index])
+            moved = shifted_plan(plan, executor.camera, start, max(a.plan_index, start), shift, step,
+                                 approach=a.kind == "grasp")
+            self.tracked_moves += 1
+            self._plan_image = image  # the shifted plan's anchors see the scene as it is now
+            ev = self._event(step, reason=f"{a.kind}_tracked", plan="global")
+            return Decision("global", False, {**ev, "shift_m": np.round(shift, 4).tolist(),
+                                              "ncc_here": round(seen.here, 3), "ncc_found": round(seen.best, 3),
+                                              "image_changed": round(seen.image_changed, 4)}, moved)
+        return None
 
     def in_global_phase(self, step: int, executor) -> bool:
         """Before failure detection starts (``--stop-on detector`` asks from then on): step < t_f, or with t_f "plan"

@@ -505,3 +505,90 @@ def test_bad_home_retry_settings(kw):
     with pytest.raises(ConfigError) as e:
         SupervisorConfig(**kw)
     assert "supervisor.home_" in str(e.value)
+
+
+class _TrackSim:
+    def __init__(self, tcp):
+        self.tcp = np.asarray(tcp, float)
+
+    def tcp_pos(self):
+        return self.tcp
+
+    def gripper_closed_cmd(self):
+        return False
+
+    def gripper_opening_m(self):
+        return 0.08
+
+
+class _TrackExecutor(FakeExecutor):
+    """What the supervisor's switch tracking reads of an executor following a global plan."""
+
+    closes = 0
+    plans_infeasible = 0
+    grasp_tcp_z = None
+
+    def __init__(self, plan, camera):
+        self.camera = camera
+        self.set_plan(plan)
+
+    def set_plan(self, plan):
+        self.plan = plan
+        self.points = self.camera.unproject(plan.uv_px, plan.depth_m)
+        self.grip = np.asarray(plan.gripper_closed, bool)
+        self.point_source = np.arange(len(plan))
+        self.index = 0
+        self.sim = getattr(self, "sim", None) or _TrackSim(self.points[0])
+
+
+def _tracking_run(slide, steps=8):
+    from test_anchors import OBJ, TABLE
+    from test_lift import FRONT
+
+    from tcot_hybrid.plan import WaypointPlan
+
+    pts = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0.03], [0.55, 0.05, 0.03],
+                    [0.55, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05]])
+    grip = np.array([False, False, False, True, True, True, False])
+    uv, depth = FRONT.project(pts)
+    plan = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=grip, camera=FRONT.name, kind="global")
+
+    def image(at):
+        img = TABLE.copy()
+        u, v = np.round(FRONT.project(np.asarray(at, float)[None])[0][0]).astype(int)
+        img[v - 4:v + 5, u - 4:u + 5] = OBJ
+        return img
+
+    class Obs:
+        def __init__(self, img):
+            self.image = img
+
+    sup = Supervisor(SupervisorConfig(mode="glsr"), FakePlanner(0.0), world_kind="libero")
+    ex = _TrackExecutor(plan, FRONT)
+    before, after = image(pts[3]), image(pts[3] + slide)
+    out = [sup.decide(0, observe=lambda: Obs(before), executor=ex)]
+    for t in range(1, steps):
+        out.append(sup.decide(t, observe=lambda: Obs(after), executor=ex))
+        if out[-1].plan is not None:  # adopted, as EpisodeRunner does
+            ex.set_plan(out[-1].plan)
+    return pts, out, sup
+
+
+def test_a_grasp_whose_object_moved_is_shifted_with_it_once_two_looks_agree():
+    from test_lift import FRONT
+
+    slide = np.array([0.06, -0.05, 0.0])
+    pts, ds, sup = _tracking_run(slide)
+    shifted = [(t, d) for t, d in enumerate(ds) if d.plan is not None]
+    assert [t for t, _ in shifted] == [4]  # looks at steps 2 and 4 (every_steps 2), confirmed by the second
+    d = shifted[0][1]
+    assert d.plan_mode == "global" and d.event["reason"] == "grasp_tracked" and sup.tracked_moves == 1
+    got = FRONT.unproject(d.plan.uv_px, d.plan.depth_m)
+    assert np.linalg.norm(got[3] - (pts[3] + slide)) < 0.02  # the grasp, within the two roundings to a pixel (1 cm here)
+    assert np.allclose(got[6], pts[6])  # the release stays
+    assert len(ds) == 8  # and the shifted plan, seen from the image it was shifted in, is followed on
+
+
+def test_a_grasp_whose_object_stayed_is_left_alone():
+    _, ds, sup = _tracking_run(np.zeros(3), steps=12)
+    assert all(d.plan is None for d in ds) and sup.tracked_moves == 0

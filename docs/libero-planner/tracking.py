@@ -1,0 +1,102 @@
+"""How GLSR's switch tracking (``supervisor.track``, :mod:`tcot_hybrid.anchors`) was measured on sampled development
+layouts (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+), docs/libero-planner.md, "Tracking
+what the plan grasps":
+
+    .venv/bin/python docs/libero-planner/tracking.py --gather   # runs/dev/* -> tracking.json
+    .venv/bin/python docs/libero-planner/tracking.py            # tracking.json -> docs/libero-planner.md
+
+The evaluations it reads (`tcot eval`, the four-suite checkpoint, GLSR) are listed in RUNS with the command that makes
+each: the same layouts with tracking on (the LIBERO default) and off.
+"""
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "tracking.json"
+SUITES, S4 = dev_runs.SUITES, dev_runs.S4
+SECTION = "libero-tracking"
+FAMILIES = "object_moved,target_moved,arm_push,camera_noise,camera_shift,init_posture,object_drop,offcenter_grasp"
+BASE = f"tcot eval --suite {S4} --planners learned --modes glsr --init sampled {dev_runs.FOUR_SUITE_MODEL}"
+# (run directory under runs/dev, tracking, what it measures, command)
+RUNS = (
+    ("track_nominal_on", "on", "none", f"{BASE} --episodes 2 --seed-start 20040"),
+    ("track_moved_off", "off", "object_moved", f"{BASE} --episodes 2 --seed-start 20040 --perturb object_moved "
+                                               "--supervisor.track.mode off"),
+    ("track_moved_on", "on", "object_moved", f"{BASE} --episodes 2 --seed-start 20040 --perturb object_moved"),
+    ("track_families_off", "off", "families", f"{BASE} --episodes 1 --seed-start 20040 --perturb {FAMILIES} "
+                                              "--supervisor.track.mode off"),
+    ("track_families_on", "on", "families", f"{BASE} --episodes 1 --seed-start 20040 --perturb {FAMILIES}"),
+)
+KEEP = ("task", "suite", "seed", "perturb", "success", "stopped_by", "grasps_tracked", "perturbation_fired")
+
+
+def gather() -> None:
+    info = {name: (track, what) for name, track, what, _ in RUNS}
+
+    def row(name: str, e: dict) -> dict:
+        ev = [x for x in e.get("events", []) if x.get("reason") in ("grasp_tracked", "release_tracked")]
+        return {"run": name, "track": info[name][0], "measures": info[name][1], **{k: e.get(k) for k in KEEP},
+                "tracked": [x["reason"].split("_")[0] for x in ev]}
+    dev_runs.gather(((name, cmd) for name, _, _, cmd in RUNS), OUT, row)
+
+
+def frac(eps: list[dict]) -> str:
+    return f"{sum(e['success'] for e in eps)}/{len(eps)}" if eps else "-"
+
+
+def won_lost(off: list[dict], on: list[dict]) -> str:
+    """"won / lost" of ``on`` against ``off`` on the (task, layout, perturbation) both ran."""
+    base = {(e["task"], e["seed"], e["perturb"]): e["success"] for e in off}
+    paired = [(base[(e["task"], e["seed"], e["perturb"])], e["success"]) for e in on
+              if (e["task"], e["seed"], e["perturb"]) in base]
+    return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
+
+
+def tracked(eps: list[dict], kind: str) -> int:
+    return sum(kind in e["tracked"] for e in eps)
+
+
+def lines() -> list[str]:
+    rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
+    rows = [r for r in rows if r["perturb"] == "none" or r["perturbation_fired"]]  # a family that could not fire: out
+    by: dict = defaultdict(list)
+    for r in rows:
+        by[r["run"]].append(r)
+    out = ["**Switch tracking under GLSR** (four-suite checkpoint; sampled development layouts; successes / episodes "
+           "whose perturbation fired; won / lost: tracking on against off on the same layouts; tracked: episodes in "
+           "which a grasp / a release was shifted):", "",
+           "| run | layouts | tracking | " + " | ".join(SUITES) + " | all four | won / lost | tracked grasp / release |",
+           "|" + "---|" * (len(SUITES) + 6)]
+    for name, track, what, _ in RUNS:
+        eps = by.get(name, [])
+        if not eps or what == "families":
+            continue
+        seeds = sorted({e["seed"] for e in eps})
+        off = by.get(name.replace("_on", "_off"), []) if track == "on" else []
+        wl = won_lost(off, eps) if off else "-"
+        out.append(f"| {what} | {seeds[0]}-{seeds[-1]} | {track} | " + " | ".join(dev_runs.per_suite(eps))
+                   + f" | **{frac(eps)}** | {wl} | {tracked(eps, 'grasp')} / {tracked(eps, 'release')} |")
+    on, off = by.get("track_families_on", []), by.get("track_families_off", [])
+    if on or off:
+        out += ["", "Every perturbation family, layout 20040 (one episode per task and family; GLSR):", "",
+                "| perturbation | tracking off | tracking on | won / lost | tracked grasp / release |",
+                "|---|---|---|---|---|"]
+        for f in sorted({e["perturb"] for e in on + off}):
+            a, b = [e for e in off if e["perturb"] == f], [e for e in on if e["perturb"] == f]
+            out.append(f"| {f} | {frac(a)} | {frac(b)} | {won_lost(a, b) if a and b else '-'} | "
+                       f"{tracked(b, 'grasp')} / {tracked(b, 'release')} |")
+    out += dev_runs.command_lines("tracking.py", 2, ((name, cmd) for name, _, _, cmd in RUNS))
+    return out
+
+
+def main() -> None:
+    dev_runs.main(__doc__, gather, lines, SECTION)
+
+
+if __name__ == "__main__":
+    main()
