@@ -3,8 +3,8 @@
 A global plan is made from one image and then followed frozen (``supervisor.t_f``); when the object it reaches for is
 moved meanwhile (knocked, slid, or by the ``object_moved`` perturbation), the plan closes the hand where the object
 was, and when the plate or basket is moved (``target_moved``) it releases beside it. The supervisor watches the plan's
-next grasp and the release after it in the planner camera instead: the image patch around the switch point's pixel in
-the plan's image is the object (or the receptacle) as the planner saw it. When the patch no longer matches there, and
+next grasp and the release after it in the planner camera instead, until the hand closes: the image patch around the
+switch point's pixel in the plan's image is the object (or the receptacle) as the planner saw it. When the patch no longer matches there, and
 it matches again nearby where the image changed (something appeared), it has moved by that much; the plan's grasp
 with its approach and lift, or its release with its descent and retreat, is shifted with it (:func:`shifted_plan`) and
 followed on. Non-privileged: the planner camera's images and its calibration, nothing from the simulator.
@@ -175,7 +175,7 @@ def shifted_plan(plan, camera, start: int, switch: int, shift_m: np.ndarray, ste
 
 @dataclass
 class SwitchAnchor:
-    """A gripper switch ahead of a global plan (its first grasp, or the release after it), as seen in the image the
+    """A gripper switch ahead of a global plan (its next grasp, or the release after it), as seen in the image the
     plan (or its last shift) was made from."""
 
     kind: str                # "grasp" | "release"
@@ -184,17 +184,20 @@ class SwitchAnchor:
     point_m: np.ndarray      # the switch's TCP point [m, world]
     uv_px: np.ndarray        # its pixel in that image
     plan_index: int          # its index among the plan's waypoints
-    done_at: int             # executor.closes (grasp) or .releases (release) when it was made: one more, it is done
+    closes: int              # executor.closes when it was made: once the hand has closed, it is no longer looked at
     candidate: np.ndarray | None = None  # where the last look found it moved to [px]
     seen: int = 0            # consecutive looks that found it there
 
     def done(self, executor) -> bool:
-        return (executor.closes if self.kind == "grasp" else executor.releases) != self.done_at
+        """Looked at only until the plan's grasp closes: what the hand then carries (a bowl, a drawer front pulled with
+        its handle) changes the view around the release by itself, and a moved look-alike is no longer a moved
+        receptacle (on development layout 20040 every release shifted after a grasp was a false one)."""
+        return executor.closes != self.closes
 
 
 def switch_anchors(plan, executor, image: np.ndarray) -> list[SwitchAnchor]:
-    """Anchors of ``plan``'s next grasp (when the hand is open) and of the release after it (or, holding something,
-    of the next release), among the points the executor has not reached yet."""
+    """Anchors of ``plan``'s next grasp and of the release after it, among the points the executor has not reached
+    yet; none while the hand is closed (see :meth:`SwitchAnchor.done`)."""
     if executor.index < 0 or not len(executor.points):
         return []
     grip = np.asarray(executor.grip, bool)
@@ -205,18 +208,16 @@ def switch_anchors(plan, executor, image: np.ndarray) -> list[SwitchAnchor]:
     releases = np.flatnonzero(ahead & ~grip & prev)
     wanted = []
     if not closed_now and grasps.size:
-        wanted.append(("grasp", int(grasps[0]), executor.closes))
+        wanted.append(("grasp", int(grasps[0])))
         later = releases[releases > grasps[0]]
         if later.size:
-            wanted.append(("release", int(later[0]), executor.releases))
-    elif closed_now and releases.size:
-        wanted.append(("release", int(releases[0]), executor.releases))
+            wanted.append(("release", int(later[0])))
     cam = plan.lift_camera(executor.camera)
     out = []
-    for kind, i, count in wanted:
+    for kind, i in wanted:
         point = executor.points[i].copy()
         uv, depth = cam.project(point[None])
         if depth[0] > 0:
             out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=point, uv_px=uv[0],
-                                    plan_index=int(executor.point_source[i]), done_at=count))
+                                    plan_index=int(executor.point_source[i]), closes=executor.closes))
     return out

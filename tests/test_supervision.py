@@ -541,7 +541,7 @@ class _TrackExecutor(FakeExecutor):
         self.sim = getattr(self, "sim", None) or _TrackSim(self.points[0])
 
 
-def _tracking_run(slide, steps=8):
+def _tracking_run(slide, steps=8, closes_after_start=0):
     from test_anchors import OBJ, TABLE
     from test_lift import FRONT
 
@@ -569,6 +569,8 @@ def _tracking_run(slide, steps=8):
     out = [sup.decide(0, observe=lambda: Obs(before), executor=ex)]
     for t in range(1, steps):
         out.append(sup.decide(t, observe=lambda: Obs(after), executor=ex))
+        if t == 1:  # the anchors are made at the first step the plan is followed; then the hand may close
+            ex.closes += closes_after_start
         if out[-1].plan is not None:  # adopted, as EpisodeRunner does
             ex.set_plan(out[-1].plan)
     return pts, out, sup
@@ -591,4 +593,10 @@ def test_a_grasp_whose_object_moved_is_shifted_with_it_once_two_looks_agree():
 
 def test_a_grasp_whose_object_stayed_is_left_alone():
     _, ds, sup = _tracking_run(np.zeros(3), steps=12)
+    assert all(d.plan is None for d in ds) and sup.tracked_moves == 0
+
+
+def test_nothing_is_tracked_once_the_hand_has_closed():
+    # what the hand carries changes the view by itself (a drawer front pulled with its handle)
+    _, ds, sup = _tracking_run(np.array([0.06, -0.05, 0.0]), steps=12, closes_after_start=1)
     assert all(d.plan is None for d in ds) and sup.tracked_moves == 0
