@@ -1,13 +1,13 @@
-"""Switch tracking: has what a frozen global plan grasps, or puts something on, moved since the plan's image?
+"""Grasp tracking: has the object a frozen global plan reaches for moved since the plan's image?
 
 A global plan is made from one image and then followed frozen (``supervisor.t_f``); when the object it reaches for is
 moved meanwhile (knocked, slid, or by the ``object_moved`` perturbation), the plan closes the hand where the object
-was, and when the plate or basket is moved (``target_moved``) it releases beside it. The supervisor watches the plan's
-next grasp and the release after it in the planner camera instead, until the hand closes: the image patch around the
-switch point's pixel in the plan's image is the object (or the receptacle) as the planner saw it. When the patch no longer matches there, and
-it matches again nearby where the image changed (something appeared), it has moved by that much; the plan's grasp
-with its approach and lift, or its release with its descent and retreat, is shifted with it (:func:`shifted_plan`) and
-followed on. Non-privileged: the planner camera's images and its calibration, nothing from the simulator.
+was. The supervisor watches the plan's next grasp in the planner camera instead, until the hand closes: the image
+patch around the grasp point's pixel in the plan's image is the object as the planner saw it. When the patch no
+longer matches there, and it matches again nearby where the image changed (something appeared), the object has moved
+by that much; the way to the grasp, the grasp and its lift are shifted with it (:func:`shifted_plan`) and followed on.
+Non-privileged: the planner camera's images and its calibration, nothing from the simulator. (The release after it
+was watched the same way too, and dropped: docs/libero-planner.md, "Tracking what the plan grasps".)
 
 Template matching is OpenCV's normalised cross-correlation (``cv2.matchTemplate``, TM_CCOEFF_NORMED) on lightly
 blurred images; the new spot must also be where the image changed, so a look-alike that stayed put (another black
@@ -23,19 +23,19 @@ import numpy as np
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 TRACK_MODES = ("auto", "on", "off")
-LIFT_XY_M = 0.02  # waypoints this close sideways to a grasp or release are its descent and lift: they move with it [m]
+LIFT_XY_M = 0.02  # waypoints this close sideways to a grasp are its descent and lift: they move with it [m]
 
 
 @dataclass(frozen=True, kw_only=True)
-class SwitchTrackConfig:
-    """How the supervisor tracks a frozen global plan's next grasp and release (module doc). Pixel sizes are in the
-    planner image (LIBERO's 128 px: about 0.7 cm a pixel on the table). Needs a planner that looks at the image.
+class GraspTrackConfig:
+    """How the supervisor tracks a frozen global plan's next grasp (module doc). Pixel sizes are in the planner
+    image (LIBERO's 128 px: about 0.7 cm a pixel on the table). Needs a planner that looks at the image.
 
     mode:            "on", "off", or "auto": on for LIBERO's GLSR (chosen on development layouts under
                      ``object_moved``: docs/libero-planner.md, "Tracking what the plan grasps"), off on the workcell (its
                      reporting tables were measured without it). Global-only and local-only never track.
     every_steps:     planner steps between two looks (each renders the planner image). Down: sooner, costlier.
-    patch_px:        half size of the patch around the switch point's pixel [px] (13 x 13 at 6). Up: more context
+    patch_px:        half size of the patch around the grasp point's pixel [px] (13 x 13 at 6). Up: more context
                      (background that moves with nothing), down: less texture to match.
     search_px:       how far from that pixel the patch is searched for [px].
     gone_ncc:        the patch counts as gone when its correlation at that pixel falls below this.
@@ -47,7 +47,7 @@ class SwitchTrackConfig:
     min_shift_px:    a match this close to that pixel is no move [px].
     confirm_looks:   consecutive looks that must find the same move (within 2 px) before the plan is shifted: a
                      passing occlusion (``camera_noise``'s patch) moves at random between images, a moved object not.
-    hand_clear_m:    a switch point is not looked at while the hand is this close to it [m] (it hides the object).
+    hand_clear_m:    the grasp is not looked at while the hand is this close to it [m] (it hides the object).
     max_moves:       shifts an episode at most.
     """
 
@@ -85,16 +85,16 @@ class SwitchTrackConfig:
 
 
 class Look(NamedTuple):
-    """One comparison of a switch point's patch between the plan's image and a later one."""
+    """One comparison of the grasp patch between the plan's image and a later one."""
 
-    here: float           # correlation at the switch point's pixel
+    here: float           # correlation at the grasp pixel
     best: float           # best correlation among changed spots (-1: none)
     uv_px: np.ndarray     # where that best match is [px]
     image_changed: float  # share of the image's pixels that changed
     moved: bool           # what was at the pixel is gone from it and found at ``uv_px``
 
 
-def look(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cfg: SwitchTrackConfig) -> Look | None:
+def look(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cfg: GraspTrackConfig) -> Look | None:
     """Compare the patch around ``uv_px`` in ``before`` with ``after`` (both (H, W, 3) uint8 images of the same
     camera); None when the patch is off the image or featureless (nothing to track)."""
     import cv2
@@ -151,20 +151,19 @@ def switch_neighbourhood(points: np.ndarray, grip: np.ndarray, switch: int) -> l
     return list(range(lo, hi + 1))
 
 
-def shifted_plan(plan, camera, start: int, switch: int, shift_m: np.ndarray, step: int, *, approach: bool):
-    """``plan`` from its waypoint ``start`` on, with waypoint ``switch`` (a grasp or a release) and the descent and the
-    lift or retreat around it (:func:`switch_neighbourhood`) moved by ``shift_m`` [m, world], and with ``approach`` every
-    waypoint from ``start`` to it too (the way to a grasp); pixels and depths re-projected through the camera the plan
-    is lifted with."""
+def shifted_plan(plan, camera, start: int, grasp: int, shift_m: np.ndarray, step: int):
+    """``plan`` from its waypoint ``start`` on, with every waypoint from ``start`` to the grasp ``grasp`` (the way
+    there and the descent) and the lift after it (:func:`switch_neighbourhood`) moved by ``shift_m`` [m, world]; the
+    rest (the carry, the release) stays. Pixels and depths re-projected through the camera the plan is lifted with."""
     from tcot_hybrid.plan import WaypointPlan
 
-    if not 0 <= start <= switch < len(plan):
-        raise ValueError(f"need 0 <= start <= switch < {len(plan)} waypoints, got start {start}, switch {switch}")
+    if not 0 <= start <= grasp < len(plan):
+        raise ValueError(f"need 0 <= start <= grasp < {len(plan)} waypoints, got start {start}, grasp {grasp}")
     cam = plan.lift_camera(camera)
     pts = cam.unproject(plan.uv_px, plan.depth_m)
     grip = np.asarray(plan.gripper_closed, bool)
-    moving = set(switch_neighbourhood(pts, grip, switch)) | (set(range(start, switch + 1)) if approach else set())
-    pts[sorted(i for i in moving if i >= start)] += np.asarray(shift_m, float)
+    moving = set(range(start, grasp + 1)) | {i for i in switch_neighbourhood(pts, grip, grasp) if i >= start}
+    pts[sorted(moving)] += np.asarray(shift_m, float)
     uv, depth = cam.project(pts[start:])
     return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=grip[start:], camera=plan.camera, kind=plan.kind,
                         step=step, tcp_rot=None if plan.tcp_rot is None else plan.tcp_rot[start:],
@@ -174,50 +173,34 @@ def shifted_plan(plan, camera, start: int, switch: int, shift_m: np.ndarray, ste
 
 
 @dataclass
-class SwitchAnchor:
-    """A gripper switch ahead of a global plan (its next grasp, or the release after it), as seen in the image the
-    plan (or its last shift) was made from."""
+class GraspAnchor:
+    """The next grasp of a global plan, as seen in the image the plan (or its last shift) was made from."""
 
-    kind: str                # "grasp" | "release"
-    plan: object             # the WaypointPlan it belongs to (identity: a new plan needs new anchors)
+    plan: object             # the WaypointPlan it belongs to (identity: a new plan needs a new anchor)
     image: np.ndarray        # the plan's image
-    point_m: np.ndarray      # the switch's TCP point [m, world]
+    point_m: np.ndarray      # the grasp point [m, world]
     uv_px: np.ndarray        # its pixel in that image
     plan_index: int          # its index among the plan's waypoints
-    closes: int              # executor.closes when it was made: once the hand has closed, it is no longer looked at
-    candidate: np.ndarray | None = None  # where the last look found it moved to [px]
+    closes: int              # executor.closes when it was made: once the hand has closed, it is done
+    candidate: np.ndarray | None = None  # where the last look found the object moved to [px]
     seen: int = 0            # consecutive looks that found it there
 
     def done(self, executor) -> bool:
-        """Looked at only until the plan's grasp closes: what the hand then carries (a bowl, a drawer front pulled with
-        its handle) changes the view around the release by itself, and a moved look-alike is no longer a moved
-        receptacle (on development layout 20040 every release shifted after a grasp was a false one)."""
         return executor.closes != self.closes
 
 
-def switch_anchors(plan, executor, image: np.ndarray) -> list[SwitchAnchor]:
-    """Anchors of ``plan``'s next grasp and of the release after it, among the points the executor has not reached
-    yet; none while the hand is closed (see :meth:`SwitchAnchor.done`)."""
-    if executor.index < 0 or not len(executor.points):
-        return []
-    grip = np.asarray(executor.grip, bool)
-    closed_now = bool(executor.sim.gripper_closed_cmd())
-    prev = np.r_[closed_now, grip[:-1]]
-    ahead = np.arange(len(grip)) >= executor.index
-    grasps = np.flatnonzero(ahead & grip & ~prev)
-    releases = np.flatnonzero(ahead & ~grip & prev)
-    wanted = []
-    if not closed_now and grasps.size:
-        wanted.append(("grasp", int(grasps[0])))
-        later = releases[releases > grasps[0]]
-        if later.size:
-            wanted.append(("release", int(later[0])))
-    cam = plan.lift_camera(executor.camera)
-    out = []
-    for kind, i in wanted:
-        point = executor.points[i].copy()
-        uv, depth = cam.project(point[None])
-        if depth[0] > 0:
-            out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=point, uv_px=uv[0],
-                                    plan_index=int(executor.point_source[i]), closes=executor.closes))
-    return out
+def grasp_anchor(plan, executor, image: np.ndarray) -> GraspAnchor | None:
+    """The anchor of ``plan``'s next grasp among the points the executor has not reached yet, or None (the hand is
+    closed, or the plan grasps nothing more)."""
+    if executor.index < 0 or not len(executor.points) or executor.sim.gripper_closed_cmd():
+        return None
+    ahead = np.flatnonzero(np.asarray(executor.grip[executor.index:], bool))
+    if not ahead.size:
+        return None
+    i = executor.index + int(ahead[0])
+    point = executor.points[i].copy()
+    uv, depth = plan.lift_camera(executor.camera).project(point[None])
+    if not depth[0] > 0:
+        return None
+    return GraspAnchor(plan=plan, image=image, point_m=point, uv_px=uv[0], plan_index=int(executor.point_source[i]),
+                       closes=executor.closes)

@@ -8,13 +8,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from tcot_hybrid.anchors import SwitchTrackConfig, look, shift_on_plane, shifted_plan  # noqa: E402
+from tcot_hybrid.anchors import GraspTrackConfig, look, shift_on_plane, shifted_plan  # noqa: E402
 from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.plan import WaypointPlan  # noqa: E402
 
 from test_lift import FRONT  # noqa: E402  (a camera looking down at the table)
 
-CFG = SwitchTrackConfig()
+CFG = GraspTrackConfig()
 rng = np.random.default_rng(0)
 # a table with faint texture; objects are 9 x 9 px patterns of their own
 TABLE = np.clip(120 + rng.normal(0, 4, (128, 128, 3)), 0, 255).astype(np.uint8)
@@ -82,37 +82,25 @@ def test_the_approach_grasp_and_lift_move_with_the_object_and_the_rest_stays():
                     [0.555, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05]])
     grip = [False, False, False, True, True, True, False]
     slide = np.array([0.05, 0.02, 0.0])
-    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 3, slide, step=9, approach=True)
+    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 3, slide, step=9)
     got = FRONT.unproject(moved.uv_px, moved.depth_m)
     want = pts[1:].copy()
     want[:4] += slide  # approach 1-2, grasp 3, lift 4; the carry (5) and the release (6) stay
     assert np.allclose(got, want, atol=1e-9)
     assert moved.gripper_closed.tolist() == grip[1:] and moved.kind == "global" and moved.step == 9
     assert moved.meta["tracked_shift_m"] == [0.05, 0.02, 0.0]
-    with pytest.raises(ValueError, match="start <= switch"):
-        shifted_plan(_plan(pts, grip), FRONT, 4, 3, slide, step=9, approach=True)
-
-
-def test_a_release_moves_with_its_descent_and_retreat_and_the_carry_stays():
-    pts = np.array([[0.55, 0.05, 0.03], [0.55, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05],
-                    [0.40, -0.15, 0.05], [0.40, -0.15, 0.15]])
-    grip = [True, True, True, True, False, False]
-    slide = np.array([-0.04, 0.06, 0.0])
-    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 4, slide, step=30, approach=False)
-    got = FRONT.unproject(moved.uv_px, moved.depth_m)
-    want = pts[1:].copy()
-    want[1:] += slide  # the descent from the carry's height (2, 3), the release (4) and the retreat (5)
-    assert np.allclose(got, want, atol=1e-9)
+    with pytest.raises(ValueError, match="start <= grasp"):
+        shifted_plan(_plan(pts, grip), FRONT, 4, 3, slide, step=9)
 
 
 @pytest.mark.parametrize("kw", [dict(mode="always"), dict(every_steps=0), dict(found_ncc=1.5),
                                 dict(changed_frac=0.0), dict(max_moves=-1), dict(hand_clear_m=0.0)])
 def test_bad_tracking_settings_are_refused_by_name(kw):
     with pytest.raises(ConfigError, match=next(iter(kw))):
-        SwitchTrackConfig(**kw)
+        GraspTrackConfig(**kw)
 
 
 def test_tracking_is_a_libero_default_only():
-    assert SwitchTrackConfig().enabled("libero") and not SwitchTrackConfig().enabled("workcell")
-    assert SwitchTrackConfig(mode="on").enabled("workcell")
-    assert not SwitchTrackConfig(mode="off").enabled("libero")
+    assert GraspTrackConfig().enabled("libero") and not GraspTrackConfig().enabled("workcell")
+    assert GraspTrackConfig(mode="on").enabled("workcell")
+    assert not GraspTrackConfig(mode="off").enabled("libero")
