@@ -259,8 +259,8 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint, GLSR tracking the plan's next grasp and release in the planner camera (\"Tracking "
-             "what the plan grasps\")", "eval-perturb-v7"),
+PERTURBS = (("shipped checkpoint, GLSR tracking the frozen plan's grasp in the planner camera (\"Tracking what the "
+             "plan grasps\")", "eval-perturb-v7"),
             ("shipped checkpoint, a moved object's new spot checked to overlap nothing (docs/reliability.md, "
              "\"Findings and fixes\")", "eval-perturb-v6"),
             ("shipped checkpoint, the planner camera's pose re-fitted from the hand (\"A knocked camera\"); a moved "
