@@ -139,11 +139,11 @@ def shift_on_plane(camera, point_m: np.ndarray, uv_to: np.ndarray) -> np.ndarray
     return d
 
 
-def switch_neighbourhood(points: np.ndarray, grip: np.ndarray, switch: int) -> list[int]:
-    """Waypoint ``switch`` (where the gripper closes or opens) and the contiguous waypoints before and after it within
-    LIFT_XY_M sideways of it: the descent to it and the lift or retreat from it, which move with it."""
-    near = np.linalg.norm(points[:, :2] - points[switch, :2], axis=1) <= LIFT_XY_M
-    lo, hi = switch, switch
+def grasp_neighbourhood(points: np.ndarray, grasp: int) -> list[int]:
+    """Waypoint ``grasp`` and the contiguous waypoints before and after it within LIFT_XY_M sideways of it: the
+    descent to it and the lift from it, which move with it."""
+    near = np.linalg.norm(points[:, :2] - points[grasp, :2], axis=1) <= LIFT_XY_M
+    lo, hi = grasp, grasp
     while lo > 0 and near[lo - 1]:
         lo -= 1
     while hi + 1 < len(points) and near[hi + 1]:
@@ -153,7 +153,7 @@ def switch_neighbourhood(points: np.ndarray, grip: np.ndarray, switch: int) -> l
 
 def shifted_plan(plan, camera, start: int, grasp: int, shift_m: np.ndarray, step: int):
     """``plan`` from its waypoint ``start`` on, with every waypoint from ``start`` to the grasp ``grasp`` (the way
-    there and the descent) and the lift after it (:func:`switch_neighbourhood`) moved by ``shift_m`` [m, world]; the
+    there and the descent) and the lift after it (:func:`grasp_neighbourhood`) moved by ``shift_m`` [m, world]; the
     rest (the carry, the release) stays. Pixels and depths re-projected through the camera the plan is lifted with."""
     from tcot_hybrid.plan import WaypointPlan
 
@@ -162,7 +162,7 @@ def shifted_plan(plan, camera, start: int, grasp: int, shift_m: np.ndarray, step
     cam = plan.lift_camera(camera)
     pts = cam.unproject(plan.uv_px, plan.depth_m)
     grip = np.asarray(plan.gripper_closed, bool)
-    moving = set(range(start, grasp + 1)) | {i for i in switch_neighbourhood(pts, grip, grasp) if i >= start}
+    moving = set(range(start, grasp + 1)) | {i for i in grasp_neighbourhood(pts, grasp) if i >= start}
     pts[sorted(moving)] += np.asarray(shift_m, float)
     uv, depth = cam.project(pts[start:])
     return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=grip[start:], camera=plan.camera, kind=plan.kind,
