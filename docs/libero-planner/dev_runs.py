@@ -62,6 +62,11 @@ def per_suite(eps: list[dict]) -> list[str]:
     return [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}" for s in SUITES]
 
 
+def frac(eps: list[dict]) -> str:
+    """Successes / episodes of ``eps`` ("-" for none)."""
+    return f"{sum(e['success'] for e in eps)}/{len(eps)}" if eps else "-"
+
+
 def won_lost(base: dict, eps: list[dict]) -> str:
     """"won / lost" of ``eps`` against ``base`` ((task, seed) -> success) on the layouts both ran."""
     paired = [(base[(e["task"], e["seed"])], e["success"]) for e in eps if (e["task"], e["seed"]) in base]

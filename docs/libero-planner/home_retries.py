@@ -37,10 +37,6 @@ def gather() -> None:
                     lambda name, e: {"run": name, "home_retries": retries[name], **{k: e.get(k) for k in KEEP}})
 
 
-def frac(eps: list[dict]) -> str:
-    return f"{sum(e['success'] for e in eps)}/{len(eps)}" if eps else "-"
-
-
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
     rows = [r for r in rows if r["perturb"] == "none" or r["perturbation_fired"]]  # a family that could not fire: out
@@ -57,11 +53,12 @@ def lines() -> list[str]:
     for n in sorted({r["home_retries"] for r in rows}):
         clean = by[("none", n)]
         homes = sum(e["homes"] or 0 for e in clean) / len(clean) if clean else 0.0
-        cols = [frac([e for e in clean if e["suite"] == s]) for s in SUITES]
-        cols.append(f"{frac(clean)} ({homes:.2f})")
+        cols = [dev_runs.frac([e for e in clean if e["suite"] == s]) for s in SUITES]
+        cols.append(f"{dev_runs.frac(clean)} ({homes:.2f})")
         for f in families:
             eps = by[(f, n)]
-            cols.append(f"{frac(eps)}" + (f" ({sum(e['homes'] or 0 for e in eps) / len(eps):.2f})" if eps else ""))
+            cols.append(dev_runs.frac(eps)
+                        + (f" ({sum(e['homes'] or 0 for e in eps) / len(eps):.2f})" if eps else ""))
         out.append(f"| {n} | " + " | ".join(cols) + " |")
     out.append("")
     base = {(r["perturb"], r["task"], r["seed"]): r["success"] for r in rows if r["home_retries"] == 0}

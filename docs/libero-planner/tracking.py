@@ -46,16 +46,9 @@ def gather() -> None:
     dev_runs.gather(((name, cmd) for name, _, _, cmd in RUNS), OUT, row)
 
 
-def frac(eps: list[dict]) -> str:
-    return f"{sum(e['success'] for e in eps)}/{len(eps)}" if eps else "-"
-
-
 def won_lost(off: list[dict], on: list[dict]) -> str:
-    """"won / lost" of ``on`` against ``off`` on the (task, layout, perturbation) both ran."""
-    base = {(e["task"], e["seed"], e["perturb"]): e["success"] for e in off}
-    paired = [(base[(e["task"], e["seed"], e["perturb"])], e["success"]) for e in on
-              if (e["task"], e["seed"], e["perturb"]) in base]
-    return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
+    """:func:`dev_runs.won_lost` of ``on`` against ``off`` (both one perturbation family)."""
+    return dev_runs.won_lost({(e["task"], e["seed"]): e["success"] for e in off}, on)
 
 
 def tracked(eps: list[dict]) -> int:
@@ -80,7 +73,7 @@ def lines() -> list[str]:
         seeds = sorted({e["seed"] for e in eps})
         off = by.get(name.replace("_on", "_off"), []) if track == "on" else []
         out.append(f"| {what} | {seeds[0]}-{seeds[-1]} | {track} | " + " | ".join(dev_runs.per_suite(eps))
-                   + f" | **{frac(eps)}** | {won_lost(off, eps) if off else '-'} | {tracked(eps)} |")
+                   + f" | **{dev_runs.frac(eps)}** | {won_lost(off, eps) if off else '-'} | {tracked(eps)} |")
     on = by.get("track_families_on", [])
     off = by.get("track_families_off", []) + [e for e in by.get("track_moved_off", []) if e["seed"] == 20040]
     if on:
@@ -89,8 +82,8 @@ def lines() -> list[str]:
                 "| perturbation | tracking off | tracking on | won / lost | tracked |", "|---|---|---|---|---|"]
         for f in sorted({e["perturb"] for e in on}):
             a, b = [e for e in off if e["perturb"] == f], [e for e in on if e["perturb"] == f]
-            first = frac(a) if a else ("alike" if not tracked(b) else "-")
-            out.append(f"| {f} | {first} | {frac(b)} | {won_lost(a, b) if a else '-'} | {tracked(b)} |")
+            first = dev_runs.frac(a) if a else ("alike" if not tracked(b) else "-")
+            out.append(f"| {f} | {first} | {dev_runs.frac(b)} | {won_lost(a, b) if a else '-'} | {tracked(b)} |")
     out += dev_runs.command_lines("tracking.py", 2, ((name, cmd) for name, _, _, cmd in RUNS))
     return out
 
