@@ -33,9 +33,10 @@ something has been released. The view from home is the one the global prompt was
 the way; but a global plan starts the task from its beginning, so after a release (the first object of a
 two-object task placed) it would fetch what is already done.
 
-Grasp tracking (``track``, :mod:`tcot_hybrid.anchors`): while a frozen global plan approaches its next grasp, the
-object's patch in the plan's image is looked for in the current one; when it has moved, the plan is shifted with it
-(reason ``grasp_tracked``) and followed on, frozen as before. Non-privileged: the planner camera and its calibration.
+Switch tracking (``track``, :mod:`tcot_hybrid.anchors`): while a frozen global plan approaches its next grasp, the
+object, and the receptacle of the placement after it, are looked for in the current image against the plan's; when
+one has moved, the plan is shifted with it (reason ``grasp_tracked`` or ``release_tracked``) and followed on, frozen
+as before. Non-privileged: the planner camera and its calibration.
 
 A detector that calls an unfinished task done leaves Algorithm 1 following a finished plan until the time limit
 (LIBERO, a detector trained on demonstrations only: docs/libero-planner.md, "Failure analysis"). With
@@ -49,7 +50,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
-from tcot_hybrid.anchors import GraspTrackConfig
+from tcot_hybrid.anchors import TrackConfig
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
@@ -115,8 +116,9 @@ class SupervisorConfig:
                        measured without it). 0: Algorithm 1 as written. Up: more retries of a plan that keeps failing,
                        less time left for local recovery.
     home_lift_m:       how far the hand rises straight up before it turns home [m].
-    track:             glsr modes: watch a frozen global plan's next grasp in the planner camera and shift the plan
-                       with the object when it moved (:mod:`tcot_hybrid.anchors`; reason ``grasp_tracked``).
+    track:             glsr modes: watch a frozen global plan's next grasp and the placement after it in the planner
+                       camera and shift the plan with the object or the receptacle when it moved
+                       (:mod:`tcot_hybrid.anchors`; reasons ``grasp_tracked``, ``release_tracked``).
     confirm_motion_m:  a local plan whose waypoints reach farther than this from its first one [m] still has work to
                        do. Chosen on held-out LIBERO frames (docs/libero-planner/confirm.py: how far local plans reach
                        on success frames and on the others). Up: overrules fewer verdicts (more false successes
@@ -140,7 +142,7 @@ class SupervisorConfig:
     empty_grasp_put_down_m: float | None = 0.03
     home_retries: int | Literal["auto"] = "auto"
     home_lift_m: float = 0.10
-    track: GraspTrackConfig = field(default_factory=GraspTrackConfig)
+    track: TrackConfig = field(default_factory=TrackConfig)
 
     def __post_init__(self) -> None:
         require_choice("supervisor.mode", self.mode, SUPERVISOR_MODES)
@@ -207,8 +209,8 @@ class Supervisor:
         self.t_f = resolve_t_f(config.t_f, world_kind)  # None: the global phase lasts as long as its plan
         self.track = config.track.enabled(world_kind) and config.mode in ("glsr", "glsr_reset")
         self._plan_image = None  # the image the global plan being followed was made (or last shifted) from
-        self._anchor = None  # its next grasp (anchors.GraspAnchor)
-        self.tracked_moves = 0
+        self._anchors: list = []  # its next grasp and placement (anchors.SwitchAnchor)
+        self.tracked = {"grasp": 0, "release": 0}  # plans shifted, by what moved
         self.state = "start"
         self.resets = 0
         self.replans = 0
@@ -260,7 +262,7 @@ class Supervisor:
         frozen = (self.state == "global_follow" and (self.t_f is None or step - self._global_from <= self.t_f)
                   and not executor.plan_finished)
         if frozen and geometric is None:
-            tracked = self._track_grasp(step, observe, executor) if self.track else None
+            tracked = self._track_switches(step, observe, executor) if self.track else None
             return tracked or Decision(None, False, None)
         p, rejected = self.detect(observe)
         successful = (not rejected) and p >= cfg.success_threshold
@@ -293,43 +295,49 @@ class Supervisor:
         if self.track:  # None for a planner that does not look (nothing to track)
             self._plan_image = getattr(observe(), "image", None)
 
-    def _track_grasp(self, step: int, observe, executor) -> Decision | None:
+    def _track_switches(self, step: int, observe, executor) -> Decision | None:
         """While a frozen global plan approaches its next grasp: a look every ``track.every_steps`` steps at whether the
-        object moved (:func:`tcot_hybrid.anchors.look`), while the hand is still clear of it; once
-        ``track.confirm_looks`` looks in a row agree, the plan is shifted with it (reason ``grasp_tracked``). None:
-        keep following."""
+        object, or the receptacle of the placement after it, moved (:meth:`tcot_hybrid.anchors.SwitchAnchor.look`),
+        while the hand is still clear of it; once ``track.confirm_looks`` looks in a row agree, the plan is shifted
+        with it (reason ``grasp_tracked`` or ``release_tracked``). None: keep following."""
         import numpy as np
 
-        from tcot_hybrid.anchors import grasp_anchor, look, shift_on_plane, shifted_plan
+        from tcot_hybrid.anchors import shift_on_plane, shifted_plan, switch_anchors
 
         tc = self.cfg.track
         plan = executor.plan
-        if plan is None or plan.kind != "global" or self._plan_image is None or self.tracked_moves >= tc.max_moves:
+        if (plan is None or plan.kind != "global" or self._plan_image is None
+                or sum(self.tracked.values()) >= tc.max_moves):
             return None
-        a = self._anchor
-        if a is None or a.plan is not plan:
-            a = self._anchor = grasp_anchor(plan, executor, self._plan_image)
-        if (a is None or a.done(executor) or step % tc.every_steps
-                or np.linalg.norm(executor.sim.tcp_pos() - a.point_m) < tc.hand_clear_m):
+        if not self._anchors or self._anchors[0].plan is not plan:
+            self._anchors = switch_anchors(plan, executor, self._plan_image, tc)
+        if step % tc.every_steps:
+            return None
+        tcp = executor.sim.tcp_pos()
+        live = [a for a in self._anchors if not a.done(executor) and np.linalg.norm(tcp - a.point_m) >= tc.hand_clear_m]
+        if not live:
             return None
         image = observe().image
-        seen = look(a.image, image, a.uv_px, tc)
-        if seen is None or not seen.moved:
-            a.candidate, a.seen = None, 0
-            return None
-        same = a.candidate is not None and np.linalg.norm(seen.uv_px - a.candidate) <= 2.0
-        a.candidate, a.seen = seen.uv_px, (a.seen + 1 if same else 1)
-        if a.seen < tc.confirm_looks:
-            return None
-        shift = shift_on_plane(plan.lift_camera(executor.camera), a.point_m, seen.uv_px)
-        start = int(executor.point_source[executor.index])
-        moved = shifted_plan(plan, executor.camera, start, max(a.plan_index, start), shift, step)
-        self.tracked_moves += 1
-        self._plan_image = image  # the shifted plan's anchor sees the object where it is now
-        ev = self._event(step, reason="grasp_tracked", plan="global")
-        return Decision("global", False, {**ev, "shift_m": np.round(shift, 4).tolist(), "ncc_here": round(seen.here, 3),
-                                          "ncc_found": round(seen.best, 3),
-                                          "image_changed": round(seen.image_changed, 4)}, moved)
+        for a in live:
+            seen = a.look(image, tc)
+            if seen is None or not seen.moved:
+                a.candidate, a.seen = None, 0
+                continue
+            same = a.candidate is not None and np.linalg.norm(seen.uv_px - a.candidate) <= 2.0
+            a.candidate, a.seen = seen.uv_px, (a.seen + 1 if same else 1)
+            if a.seen < tc.confirm_looks:
+                continue
+            shift = shift_on_plane(plan.lift_camera(executor.camera), a.point_m, seen.uv_px)
+            start = int(executor.point_source[executor.index])
+            moved = shifted_plan(plan, executor.camera, start, max(a.plan_index, start), shift, step,
+                                 approach=a.kind == "grasp")
+            self.tracked[a.kind] += 1
+            self._plan_image = image  # the shifted plan's anchors see the scene as it is now
+            ev = self._event(step, reason=f"{a.kind}_tracked", plan="global")
+            return Decision("global", False, {**ev, "shift_m": np.round(shift, 4).tolist(),
+                                              "score_here": round(seen.here, 3), "score_found": round(seen.best, 3),
+                                              "image_changed": round(seen.image_changed, 4)}, moved)
+        return None
 
     def in_global_phase(self, step: int, executor) -> bool:
         """Before failure detection starts (``--stop-on detector`` asks from then on): step < t_f, or with t_f "plan"

@@ -1,4 +1,5 @@
-"""Grasp tracking (tcot_hybrid.anchors): finding a moved object between two planner images, and moving a plan with it."""
+"""Switch tracking (tcot_hybrid.anchors): finding a moved object or receptacle between two planner images, and moving
+a plan with it."""
 from __future__ import annotations
 
 import os
@@ -8,17 +9,27 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from tcot_hybrid.anchors import GraspTrackConfig, look, shift_on_plane, shifted_plan  # noqa: E402
+from tcot_hybrid.anchors import TrackConfig, look, look_receptacle, shift_on_plane, shifted_plan  # noqa: E402
 from tcot_hybrid.errors import ConfigError  # noqa: E402
 from tcot_hybrid.plan import WaypointPlan  # noqa: E402
 
 from test_lift import FRONT  # noqa: E402  (a camera looking down at the table)
 
-CFG = GraspTrackConfig()
+CFG = TrackConfig()
 rng = np.random.default_rng(0)
 # a table with faint texture; objects are 9 x 9 px patterns of their own
 TABLE = np.clip(120 + rng.normal(0, 4, (128, 128, 3)), 0, 255).astype(np.uint8)
 OBJ = np.clip(rng.integers(0, 255, (9, 9, 3)), 0, 255).astype(np.uint8)
+
+
+def plate(img: np.ndarray, centre) -> np.ndarray:
+    """``img`` with a featureless plate (a light disc, 15 px across, with a darker rim) at pixel ``centre``."""
+    import cv2
+
+    out = img.copy()
+    cv2.circle(out, (int(centre[0]), int(centre[1])), 15, (150, 110, 110), -1)
+    cv2.circle(out, (int(centre[0]), int(centre[1])), 12, (235, 235, 230), -1)
+    return out
 
 
 def scene(*centres) -> np.ndarray:
@@ -82,25 +93,56 @@ def test_the_approach_grasp_and_lift_move_with_the_object_and_the_rest_stays():
                     [0.555, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05]])
     grip = [False, False, False, True, True, True, False]
     slide = np.array([0.05, 0.02, 0.0])
-    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 3, slide, step=9)
+    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 3, slide, step=9, approach=True)
     got = FRONT.unproject(moved.uv_px, moved.depth_m)
     want = pts[1:].copy()
     want[:4] += slide  # approach 1-2, grasp 3, lift 4; the carry (5) and the release (6) stay
     assert np.allclose(got, want, atol=1e-9)
     assert moved.gripper_closed.tolist() == grip[1:] and moved.kind == "global" and moved.step == 9
     assert moved.meta["tracked_shift_m"] == [0.05, 0.02, 0.0]
-    with pytest.raises(ValueError, match="start <= grasp"):
-        shifted_plan(_plan(pts, grip), FRONT, 4, 3, slide, step=9)
+    with pytest.raises(ValueError, match="start <= switch"):
+        shifted_plan(_plan(pts, grip), FRONT, 4, 3, slide, step=9, approach=True)
+
+
+def test_a_release_moves_with_its_descent_and_retreat_and_the_carry_stays():
+    pts = np.array([[0.55, 0.05, 0.03], [0.55, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.12],
+                    [0.40, -0.15, 0.05], [0.40, -0.15, 0.15]])
+    grip = [True, True, True, True, False, False]
+    slide = np.array([-0.04, 0.09, 0.0])
+    moved = shifted_plan(_plan(pts, grip), FRONT, 1, 4, slide, step=3, approach=False)
+    got = FRONT.unproject(moved.uv_px, moved.depth_m)
+    want = pts[1:].copy()
+    want[1:] += slide  # the carry's end above the plate, the descent, the release and the retreat; the lift stays
+    assert np.allclose(got, want, atol=1e-9)
+
+
+def test_a_featureless_plate_that_moved_is_found_where_it_went():
+    before = plate(TABLE, (60, 70))
+    after = plate(TABLE, (52, 84))
+    rim = np.array([70.0, 64.0])  # the plan lets go near the rim, where a small patch sees only plate
+    seen = look_receptacle(before, after, rim, CFG)
+    assert seen.moved and np.allclose(seen.uv_px - rim, (-8, 14))
+    assert seen.best < CFG.release_residual_ratio * seen.here
+
+
+def test_a_plate_that_stayed_is_not_looked_at_and_a_move_onto_nothing_is_no_move():
+    assert look_receptacle(plate(TABLE, (60, 70)), plate(TABLE, (60, 70)), np.array([70.0, 64.0]), CFG) is None
+    # the plate went out of reach (or out of sight): its old place changed, no new place shows it
+    gone = look_receptacle(plate(TABLE, (60, 70)), TABLE, np.array([70.0, 64.0]), CFG)
+    assert gone is not None and not gone.moved
+    assert look_receptacle(TABLE, TABLE, np.array([-1.0, 64.0]), CFG) is None
 
 
 @pytest.mark.parametrize("kw", [dict(mode="always"), dict(every_steps=0), dict(found_ncc=1.5),
-                                dict(changed_frac=0.0), dict(max_moves=-1), dict(hand_clear_m=0.0)])
+                                dict(changed_frac=0.0), dict(max_moves=-1), dict(hand_clear_m=0.0),
+                                dict(releases="yes"), dict(placement_lift_m=0.0), dict(release_window_px=0),
+                                dict(release_residual_ratio=1.5), dict(release_landed_frac=0.0)])
 def test_bad_tracking_settings_are_refused_by_name(kw):
     with pytest.raises(ConfigError, match=next(iter(kw))):
-        GraspTrackConfig(**kw)
+        TrackConfig(**kw)
 
 
 def test_tracking_is_a_libero_default_only():
-    assert GraspTrackConfig().enabled("libero") and not GraspTrackConfig().enabled("workcell")
-    assert GraspTrackConfig(mode="on").enabled("workcell")
-    assert not GraspTrackConfig(mode="off").enabled("libero")
+    assert TrackConfig().enabled("libero") and not TrackConfig().enabled("workcell")
+    assert TrackConfig(mode="on").enabled("workcell")
+    assert not TrackConfig(mode="off").enabled("libero")

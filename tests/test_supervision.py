@@ -541,21 +541,29 @@ class _TrackExecutor(FakeExecutor):
         self.sim = getattr(self, "sim", None) or _TrackSim(self.points[0])
 
 
-def _tracking_run(slide, steps=8, closes_after_start=0):
-    from test_anchors import OBJ, TABLE
+PICK_AND_PLACE = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0.03], [0.55, 0.05, 0.03],
+                           [0.55, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05]])
+PICK_AND_PLACE_GRIP = np.array([False, False, False, True, True, True, False])
+
+
+def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PICK_AND_PLACE):
+    """GLSR following a frozen global plan (approach, grasp at 3, lift, carry, release at 6) while the object under
+    its grasp slides by ``slide`` (and a plate under its release by ``plate_slide``) after the plan's image."""
+    from test_anchors import OBJ, TABLE, plate
     from test_lift import FRONT
 
     from tcot_hybrid.plan import WaypointPlan
 
-    pts = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0.03], [0.55, 0.05, 0.03],
-                    [0.55, 0.05, 0.20], [0.40, -0.15, 0.20], [0.40, -0.15, 0.05]])
-    grip = np.array([False, False, False, True, True, True, False])
+    grip = PICK_AND_PLACE_GRIP
     uv, depth = FRONT.project(pts)
     plan = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=grip, camera=FRONT.name, kind="global")
 
-    def image(at):
-        img = TABLE.copy()
-        u, v = np.round(FRONT.project(np.asarray(at, float)[None])[0][0]).astype(int)
+    def pixel(at):
+        return np.round(FRONT.project(np.asarray(at, float)[None])[0][0]).astype(int)
+
+    def image(at, plate_at):
+        img = TABLE.copy() if plate_at is None else plate(TABLE, pixel(plate_at))
+        u, v = pixel(at)
         img[v - 4:v + 5, u - 4:u + 5] = OBJ
         return img
 
@@ -565,7 +573,9 @@ def _tracking_run(slide, steps=8, closes_after_start=0):
 
     sup = Supervisor(SupervisorConfig(mode="glsr"), FakePlanner(0.0), world_kind="libero")
     ex = _TrackExecutor(plan, FRONT)
-    before, after = image(pts[3]), image(pts[3] + slide)
+    plate_before = None if plate_slide is None else pts[6] - (0.0, 0.0, pts[6][2])
+    plate_after = None if plate_slide is None else plate_before + plate_slide
+    before, after = image(pts[3], plate_before), image(pts[3] + slide, plate_after)
     out = [sup.decide(0, observe=lambda: Obs(before), executor=ex)]
     for t in range(1, steps):
         out.append(sup.decide(t, observe=lambda: Obs(after), executor=ex))
@@ -584,7 +594,7 @@ def test_a_grasp_whose_object_moved_is_shifted_with_it_once_two_looks_agree():
     shifted = [(t, d) for t, d in enumerate(ds) if d.plan is not None]
     assert [t for t, _ in shifted] == [4]  # looks at steps 2 and 4 (every_steps 2), confirmed by the second
     d = shifted[0][1]
-    assert d.plan_mode == "global" and d.event["reason"] == "grasp_tracked" and sup.tracked_moves == 1
+    assert d.plan_mode == "global" and d.event["reason"] == "grasp_tracked" and sup.tracked == {"grasp": 1, "release": 0}
     got = FRONT.unproject(d.plan.uv_px, d.plan.depth_m)
     assert np.linalg.norm(got[3] - (pts[3] + slide)) < 0.02  # the grasp, within the two roundings to a pixel (1 cm here)
     assert np.allclose(got[6], pts[6])  # the release stays
@@ -593,10 +603,32 @@ def test_a_grasp_whose_object_moved_is_shifted_with_it_once_two_looks_agree():
 
 def test_a_grasp_whose_object_stayed_is_left_alone():
     _, ds, sup = _tracking_run(np.zeros(3), steps=12)
-    assert all(d.plan is None for d in ds) and sup.tracked_moves == 0
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
 
 
 def test_nothing_is_tracked_once_the_hand_has_closed():
     # what the hand carries changes the view by itself (a drawer front pulled with its handle)
     _, ds, sup = _tracking_run(np.array([0.06, -0.05, 0.0]), steps=12, closes_after_start=1)
-    assert all(d.plan is None for d in ds) and sup.tracked_moves == 0
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
+
+
+def test_a_placement_whose_plate_moved_is_shifted_with_it_and_the_grasp_stays():
+    from test_lift import FRONT
+
+    plate_slide = np.array([-0.04, 0.09, 0.0])
+    pts, ds, sup = _tracking_run(np.zeros(3), plate_slide=plate_slide)
+    shifted = [(t, d) for t, d in enumerate(ds) if d.plan is not None]
+    assert [t for t, _ in shifted] == [4] and sup.tracked == {"grasp": 0, "release": 1}
+    d = shifted[0][1]
+    assert d.event["reason"] == "release_tracked" and d.plan_mode == "global"
+    got = FRONT.unproject(d.plan.uv_px, d.plan.depth_m)
+    assert np.linalg.norm(got[5:] - (pts[5:] + plate_slide), axis=1).max() < 0.02  # above the plate, the release
+    assert np.allclose(got[:5], pts[:5])  # the way there, the grasp and its lift stay
+
+
+def test_a_release_after_no_lift_is_no_placement_and_is_not_watched():
+    # a drawer's handle, pulled at one height and let go: where it is let go the arm passes on its way
+    pull = PICK_AND_PLACE.copy()
+    pull[4:, 2] = 0.03
+    _, ds, sup = _tracking_run(np.zeros(3), plate_slide=np.array([-0.04, 0.09, 0.0]), pts=pull)
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
