@@ -16,7 +16,9 @@ itself), each against the plan's image:
   pixels that changed since the plan's image (the receptacle's old place and its new one), by masked squared
   differences (``cv2.matchTemplate``, TM_SQDIFF with a mask): the shift that carries those pixels onto changed pixels
   of the new image that look like them is the receptacle's move. Only a release after a lift counts as a placement
-  (``placement_lift_m``): a drawer's handle let go at the end of a pull lies where the arm passes on its way.
+  (``placement_lift_m``): a drawer's handle let go at the end of a pull lies where the arm passes on its way. And it
+  is looked at only while the object to grasp is still as the plan saw it: one that moved away from beside its plate
+  changes the plate's window as a moved plate does.
 
 The way to a grasp, the grasp and its lift, or a release's descent, release and retreat, are shifted with what moved
 (:func:`shifted_plan`) and followed on. Non-privileged: the planner camera's images and its calibration, nothing from
@@ -167,10 +169,14 @@ def look(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cfg: TrackCon
     return Look(here=here, best=float(best), uv_px=at, image_changed=image_changed, moved=bool(moved))
 
 
-def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cfg: TrackConfig) -> Look | None:
+def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cfg: TrackConfig,
+                    grasp_uv_px: np.ndarray | None = None) -> Look | None:
     """Has the receptacle under the release pixel ``uv_px`` moved between ``before`` and ``after`` (module doc)?
     ``here`` and ``best`` are RMS colour differences (0-255) of the window's changed pixels with no shift and at the
-    best shift; None when the pixel is off the image or too little of its window changed to say."""
+    best shift. None when the pixel is off the image, too little of its window changed to say, or the object the
+    plan grasps first (at ``grasp_uv_px`` in ``before``) is no longer as it was: more than ``changed_frac`` of the
+    pixels within ``patch_px`` of it changed. One change at a time: an object moved away from beside its plate changes
+    the plate's window as a moved plate does (and a hand at the object hides it)."""
     import cv2
 
     i0, i1, changed = _blurred_and_changed(before, after, cfg)
@@ -178,6 +184,11 @@ def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cf
     u, v = int(round(float(uv_px[0]))), int(round(float(uv_px[1])))
     if not (0 <= u < W and 0 <= v < H):
         return None
+    if grasp_uv_px is not None:
+        yy, xx = np.mgrid[:H, :W]
+        near = (xx - float(grasp_uv_px[0])) ** 2 + (yy - float(grasp_uv_px[1])) ** 2 <= cfg.patch_px ** 2
+        if near.any() and changed[near].mean() > cfg.changed_frac:
+            return None
     w, r = cfg.release_window_px, cfg.search_px
     pad = w + r  # near the border the window and its search run off the image: padding that never matches
     u, v = u + pad, v + pad
@@ -261,6 +272,7 @@ class SwitchAnchor:
     uv_px: np.ndarray        # its pixel in that image
     plan_index: int          # its index among the plan's waypoints
     closes: int              # executor.closes when it was made: once the hand has closed, it is done
+    grasp_uv_px: np.ndarray | None = None  # a release's: the pixel of the grasp before it (look_receptacle)
     candidate: np.ndarray | None = None  # where the last look found it moved to [px]
     seen: int = 0            # consecutive looks that found it there
 
@@ -268,7 +280,9 @@ class SwitchAnchor:
         return executor.closes != self.closes
 
     def look(self, image: np.ndarray, cfg: TrackConfig) -> Look | None:
-        return (look if self.kind == "grasp" else look_receptacle)(self.image, image, self.uv_px, cfg)
+        if self.kind == "grasp":
+            return look(self.image, image, self.uv_px, cfg)
+        return look_receptacle(self.image, image, self.uv_px, cfg, self.grasp_uv_px)
 
 
 def switch_anchors(plan, executor, image: np.ndarray, cfg: TrackConfig) -> list[SwitchAnchor]:
@@ -290,11 +304,11 @@ def switch_anchors(plan, executor, image: np.ndarray, cfg: TrackConfig) -> list[
         if z.max() - max(z[0], z[-1]) >= cfg.placement_lift_m:
             wanted.append(("release", release))
     cam = plan.lift_camera(executor.camera)
+    uv, depth = cam.project(executor.points[[i for _, i in wanted]])
     out = []
-    for kind, i in wanted:
-        point = executor.points[i].copy()
-        uv, depth = cam.project(point[None])
-        if depth[0] > 0:
-            out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=point, uv_px=uv[0],
-                                    plan_index=int(executor.point_source[i]), closes=executor.closes))
+    for (kind, i), uv_i, depth_i in zip(wanted, uv, depth):
+        if depth_i > 0:
+            out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=executor.points[i].copy(), uv_px=uv_i,
+                                    plan_index=int(executor.point_source[i]), closes=executor.closes,
+                                    grasp_uv_px=uv[0] if kind == "release" else None))
     return out

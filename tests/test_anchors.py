@@ -146,3 +146,17 @@ def test_tracking_is_a_libero_default_only():
     assert TrackConfig().enabled("libero") and not TrackConfig().enabled("workcell")
     assert TrackConfig(mode="on").enabled("workcell")
     assert not TrackConfig(mode="off").enabled("libero")
+
+
+def test_a_plate_is_not_judged_while_the_object_to_grasp_has_moved_too():
+    # a bowl beside the plate taken away changes the plate's window as a moved plate does: one change at a time
+    before = plate(TABLE, (60, 70))
+    before[66:75, 78:87] = OBJ
+    after = plate(TABLE, (52, 84))
+    after[40:49, 100:109] = OBJ
+    rim = np.array([70.0, 64.0])
+    assert look_receptacle(before, after, rim, CFG, grasp_uv_px=np.array([82.0, 70.0])) is None
+    still = plate(TABLE, (52, 84))
+    still[66:75, 78:87] = OBJ
+    seen = look_receptacle(before, still, rim, CFG, grasp_uv_px=np.array([82.0, 70.0]))
+    assert seen is not None and seen.moved

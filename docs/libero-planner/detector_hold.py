@@ -46,19 +46,11 @@ def lines() -> list[str]:
            "time):", "",
            "| perturbation | as shipped | stopped early | never judged done | won / lost | wall as shipped [s] | "
            "wall never judged done [s] |", "|---|---|---|---|---|---|---|"]
-    totals = [0, 0, 0, 0, 0]
-    for fam in sorted(by):
-        a, b = by[fam][base], by[fam][other]
-        paired = {(e["task"], e["seed"]): e["success"] for e in a}
-        early = sum(bool(e["premature_stop"]) for e in a)
-        wa, wb = sum(e["wall_time_s"] for e in a), sum(e["wall_time_s"] for e in b)
-        out.append(f"| {fam} | {dev_runs.frac(a)} | {early} | {dev_runs.frac(b)} | "
-                   f"{dev_runs.won_lost(paired, b)} | {wa:.0f} | {wb:.0f} |")
-        for i, v in enumerate((sum(e["success"] for e in a), sum(e["success"] for e in b), early, wa, wb)):
-            totals[i] += v
-    n = sum(len(v[base]) for v in by.values())
-    out.append(f"| all | **{totals[0]}/{n}** | {totals[2]} | **{totals[1]}/{n}** | | {totals[3]:.0f} | "
-               f"{totals[4]:.0f} |")
+    every = {run: [e for fam in by.values() for e in fam[run]] for run in (base, other)}
+    early_all = sum(bool(e["premature_stop"]) for e in every[base])
+    wall = {run: sum(e["wall_time_s"] for e in eps) for run, eps in every.items()}
+    out.append(f"| all | **{dev_runs.frac(every[base])}** | {early_all} | **{dev_runs.frac(every[other])}** | | "
+               f"{wall[base]:.0f} | {wall[other]:.0f} |")
     out += dev_runs.command_lines("detector_hold.py", 2, ((name, cmd) for name, _, cmd in RUNS))
     return out
 
