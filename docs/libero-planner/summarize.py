@@ -259,7 +259,9 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint, GLSR tracking the frozen plan's grasp in the planner camera (\"Tracking what the "
+PERTURBS = (("shipped checkpoint, GLSR tracking the frozen plan's grasp and the placement after it in the planner "
+             "camera (\"Tracking what the plan grasps\")", "eval-perturb-v8"),
+            ("shipped checkpoint, GLSR tracking the frozen plan's grasp in the planner camera (\"Tracking what the "
              "plan grasps\")", "eval-perturb-v7"),
             ("shipped checkpoint, a moved object's new spot checked to overlap nothing (docs/reliability.md, "
              "\"Findings and fixes\")", "eval-perturb-v6"),

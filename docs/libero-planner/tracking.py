@@ -24,7 +24,8 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "tracking.json"
 SUITES, S4 = dev_runs.SUITES, dev_runs.S4
 SECTION = "libero-tracking"
-FAMILIES = "object_moved,target_moved,arm_push,camera_noise,camera_shift,init_posture,object_drop,offcenter_grasp"
+OTHERS = "arm_push,camera_noise,camera_shift,init_posture,object_drop,offcenter_grasp"
+FAMILIES = f"object_moved,target_moved,{OTHERS}"
 BASE = f"tcot eval --suite {S4} --planners learned --modes glsr --init sampled {dev_runs.FOUR_SUITE_MODEL}"
 TWO, ONE = "--episodes 2 --seed-start 20040", "--episodes 1 --seed-start 20040"
 OFF, GRASPS = "--supervisor.track.mode off", "--supervisor.track.no-releases"
@@ -40,7 +41,8 @@ RUNS = (
     ("release_target_on", "grasps + releases", "target_moved", f"{BASE} {TWO} --perturb target_moved"),
     ("track_families_off", "off", "families", f"{BASE} {ONE} --perturb camera_noise,init_posture,target_moved {OFF}"),
     ("track_families_on", "grasps", "families", f"{BASE} {ONE} --perturb {FAMILIES} {GRASPS}"),
-    ("release_families_on", "grasps + releases", "families", f"{BASE} {ONE} --perturb {FAMILIES}"),
+    # object_moved and target_moved of 20040 with both watched: the two-layout runs above
+    ("release_families_on", "grasps + releases", "families", f"{BASE} {ONE} --perturb {OTHERS}"),
 )
 KEEP = ("task", "suite", "seed", "perturb", "success", "stopped_by", "grasps_tracked", "releases_tracked",
         "perturbation_fired")
