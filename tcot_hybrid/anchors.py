@@ -34,7 +34,7 @@ import numpy as np
 from tcot_hybrid.config import require_choice, require_int, require_positive
 
 TRACK_MODES = ("auto", "on", "off")
-LIFT_XY_M = 0.02  # waypoints this close sideways to a grasp are its descent and lift: they move with it [m]
+LIFT_XY_M = 0.02  # waypoints this close sideways to a switch are its descent and lift or retreat: they move with it [m]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,8 +44,9 @@ class TrackConfig:
     the image.
 
     mode:            "on", "off", or "auto": on for LIBERO's GLSR (chosen on development layouts under
-                     ``object_moved``: docs/libero-planner.md, "Tracking what the plan grasps"), off on the workcell (its
-                     reporting tables were measured without it). Global-only and local-only never track.
+                     ``object_moved`` and ``target_moved``: docs/libero-planner.md, "Tracking what the plan grasps"),
+                     off on the workcell (its reporting tables were measured without it). Global-only and local-only
+                     never track.
     every_steps:     planner steps between two looks (each renders the planner image). Down: sooner, costlier.
     patch_px:        half size of the patch around the grasp point's pixel [px] (13 x 13 at 6). Up: more context
                      (background that moves with nothing), down: less texture to match.
