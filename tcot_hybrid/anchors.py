@@ -49,18 +49,20 @@ class TrackConfig:
                      never track.
     every_steps:     planner steps between two looks (each renders the planner image). Down: sooner, costlier.
     patch_px:        half size of the patch around the grasp point's pixel [px] (13 x 13 at 6). Up: more context
-                     (background that moves with nothing), down: less texture to match.
-    search_px:       how far from that pixel the patch is searched for [px].
+                     (background that moves with nothing), down: less texture to match. Also the radius around the
+                     grasp pixel that must be unchanged for a placement to be judged (``look_receptacle``).
+    search_px:       how far from that pixel the patch (or, for a placement, the release window) is searched for [px].
     gone_ncc:        the patch counts as gone when its correlation at that pixel falls below this.
     found_ncc:       a match elsewhere must correlate at least this well. Up: fewer wrong moves, more missed ones.
     changed_level:   a pixel whose colour changed by more than this (0-255, any channel, after a 3 x 3 blur) changed.
-    changed_frac:    at least this share of a match's patch must have changed (the object appeared there).
+    changed_frac:    at least this share of a match's patch must have changed (the object appeared there); a
+                     placement is not judged while more than this share around the grasp pixel changed.
     max_image_changed: no move is taken when more than this share of the whole image changed (the camera itself
                      moved, or noise): a tracked shift would then be the view's, not the object's.
     min_shift_px:    a match this close to that pixel is no move [px].
     confirm_looks:   consecutive looks that must find the same move (within 2 px) before the plan is shifted: a
                      passing occlusion (``camera_noise``'s patch) moves at random between images, a moved object not.
-    hand_clear_m:    the grasp is not looked at while the hand is this close to it [m] (it hides the object).
+    hand_clear_m:    a grasp or a release is not looked at while the hand is this close to it [m] (it hides it).
     max_moves:       shifts an episode at most (grasps and releases together).
     releases:        also watch the release of a placement (``look_receptacle``); False: grasps only.
     placement_lift_m: a release counts as a placement when the plan lifts at least this much between its grasp and
@@ -123,7 +125,7 @@ class Look(NamedTuple):
     (:func:`look_receptacle`: RMS colour differences)."""
 
     here: float           # the score with no shift (at the switch's own pixel)
-    best: float           # the best score among changed spots (grasp: -1 when none)
+    best: float           # the best score (grasp: among changed spots, -1 when none; release: at the best shift)
     uv_px: np.ndarray     # where that best match is [px]
     image_changed: float  # share of the image's pixels that changed
     moved: bool           # what was at the pixel is gone from it and found at ``uv_px``
@@ -174,7 +176,8 @@ def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cf
                     grasp_uv_px: np.ndarray | None = None) -> Look | None:
     """Has the receptacle under the release pixel ``uv_px`` moved between ``before`` and ``after`` (module doc)?
     ``here`` and ``best`` are RMS colour differences (0-255) of the window's changed pixels with no shift and at the
-    best shift. None when the pixel is off the image, too little of its window changed to say, or the object the
+    best shift. A receptacle near the image's edge whose changed pixels would shift off it is not found (the
+    cautious way: no move). None when the pixel is off the image, too little of its window changed to say, or the object the
     plan grasps first (at ``grasp_uv_px`` in ``before``) is no longer as it was: more than ``changed_frac`` of the
     pixels within ``patch_px`` of it changed. One change at a time: an object moved away from beside its plate changes
     the plate's window as a moved plate does (and a hand at the object hides it)."""
@@ -311,5 +314,5 @@ def switch_anchors(plan, executor, image: np.ndarray, cfg: TrackConfig) -> list[
         if depth_i > 0:
             out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=executor.points[i].copy(), uv_px=uv_i,
                                     plan_index=int(executor.point_source[i]), closes=executor.closes,
-                                    grasp_uv_px=uv[0] if kind == "release" else None))
+                                    grasp_uv_px=uv[0] if kind == "release" and depth[0] > 0 else None))
     return out

@@ -327,6 +327,7 @@ class Supervisor:
             a.candidate, a.seen = seen.uv_px, (a.seen + 1 if same else 1)
             if a.seen < tc.confirm_looks:
                 continue
+            # a release's move is read at the release point's height, not the plate's: a few mm short on 10 cm
             shift = shift_on_plane(plan.lift_camera(executor.camera), a.point_m, seen.uv_px)
             start = int(executor.point_source[executor.index])
             moved = shifted_plan(plan, executor.camera, start, max(a.plan_index, start), shift, step,

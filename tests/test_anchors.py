@@ -130,7 +130,9 @@ def test_a_plate_that_stayed_is_not_looked_at_and_a_move_onto_nothing_is_no_move
     # the plate went out of reach (or out of sight): its old place changed, no new place shows it
     gone = look_receptacle(plate(TABLE, (60, 70)), TABLE, np.array([70.0, 64.0]), CFG)
     assert gone is not None and not gone.moved
-    assert look_receptacle(TABLE, TABLE, np.array([-1.0, 64.0]), CFG) is None
+    # a release pixel off the image is refused as such, not for want of change
+    assert look_receptacle(plate(TABLE, (20, 70)), plate(TABLE, (12, 84)), np.array([-1.0, 64.0]), CFG) is None
+    assert look_receptacle(plate(TABLE, (20, 70)), plate(TABLE, (12, 84)), np.array([0.0, 64.0]), CFG) is not None
 
 
 @pytest.mark.parametrize("kw", [dict(mode="always"), dict(every_steps=0), dict(found_ncc=1.5),

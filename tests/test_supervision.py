@@ -546,7 +546,7 @@ PICK_AND_PLACE = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0
 PICK_AND_PLACE_GRIP = np.array([False, False, False, True, True, True, False])
 
 
-def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PICK_AND_PLACE):
+def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PICK_AND_PLACE, track=None):
     """GLSR following a frozen global plan (approach, grasp at 3, lift, carry, release at 6) while the object under
     its grasp slides by ``slide`` (and a plate under its release by ``plate_slide``) after the plan's image."""
     from test_anchors import OBJ, TABLE, plate
@@ -571,7 +571,8 @@ def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PI
         def __init__(self, img):
             self.image = img
 
-    sup = Supervisor(SupervisorConfig(mode="glsr"), FakePlanner(0.0), world_kind="libero")
+    cfg = SupervisorConfig(mode="glsr") if track is None else SupervisorConfig(mode="glsr", track=track)
+    sup = Supervisor(cfg, FakePlanner(0.0), world_kind="libero")
     ex = _TrackExecutor(plan, FRONT)
     plate_before = None if plate_slide is None else pts[6] - (0.0, 0.0, pts[6][2])
     plate_after = None if plate_slide is None else plate_before + plate_slide
@@ -631,4 +632,23 @@ def test_a_release_after_no_lift_is_no_placement_and_is_not_watched():
     pull = PICK_AND_PLACE.copy()
     pull[4:, 2] = 0.03
     _, ds, sup = _tracking_run(np.zeros(3), plate_slide=np.array([-0.04, 0.09, 0.0]), pts=pull)
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
+
+
+def test_a_moved_plate_is_left_alone_with_releases_off_or_once_the_hand_has_closed():
+    from tcot_hybrid.anchors import TrackConfig
+
+    plate_slide = np.array([-0.04, 0.09, 0.0])
+    _, ds, sup = _tracking_run(np.zeros(3), steps=12, plate_slide=plate_slide, closes_after_start=1)
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
+    _, ds, sup = _tracking_run(np.zeros(3), steps=12, plate_slide=plate_slide,
+                               track=TrackConfig(releases=False))
+    assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
+
+
+def test_a_release_shift_counts_against_the_moves_budget():
+    from tcot_hybrid.anchors import TrackConfig
+
+    _, ds, sup = _tracking_run(np.zeros(3), steps=12, plate_slide=np.array([-0.04, 0.09, 0.0]),
+                               track=TrackConfig(max_moves=0))
     assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
