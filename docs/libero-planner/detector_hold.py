@@ -46,6 +46,12 @@ def lines() -> list[str]:
            "time):", "",
            "| perturbation | as shipped | stopped early | never judged done | won / lost | wall as shipped [s] | "
            "wall never judged done [s] |", "|---|---|---|---|---|---|---|"]
+    for fam in sorted(by):
+        a, b = by[fam][base], by[fam][other]
+        early = sum(bool(e["premature_stop"]) for e in a)
+        won_lost = dev_runs.won_lost({(e["task"], e["seed"]): e["success"] for e in a}, b)
+        out.append(f"| {fam} | {dev_runs.frac(a)} | {early} | {dev_runs.frac(b)} | {won_lost} | "
+                   f"{sum(e['wall_time_s'] for e in a):.0f} | {sum(e['wall_time_s'] for e in b):.0f} |")
     every = {run: [e for fam in by.values() for e in fam[run]] for run in (base, other)}
     early_all = sum(bool(e["premature_stop"]) for e in every[base])
     wall = {run: sum(e["wall_time_s"] for e in eps) for run, eps in every.items()}
