@@ -31,7 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tcot_hybrid.config import require_choice, require_int, require_positive
+from tcot_hybrid.config import require_bool, require_choice, require_int, require_positive
+from tcot_hybrid.errors import ConfigError
 
 TRACK_MODES = ("auto", "on", "off")
 LIFT_XY_M = 0.02  # waypoints this close sideways to a switch are its descent and lift or retreat: they move with it [m]
@@ -101,18 +102,13 @@ class TrackConfig:
         for name in ("every_steps", "patch_px", "search_px", "confirm_looks", "release_window_px"):
             require_int(f"supervisor.track.{name}", getattr(self, name), minimum=1)
         require_int("supervisor.track.max_moves", self.max_moves, minimum=0)
-        if not isinstance(self.releases, bool):
-            from tcot_hybrid.errors import ConfigError
-
-            raise ConfigError(f"supervisor.track.releases must be true or false, got {self.releases!r}")
+        require_bool("supervisor.track.releases", self.releases)
         for name in ("changed_level", "min_shift_px", "hand_clear_m", "placement_lift_m", "release_max_residual"):
             require_positive(f"supervisor.track.{name}", getattr(self, name))
         for name in ("gone_ncc", "found_ncc", "changed_frac", "max_image_changed", "release_changed_frac",
                      "release_residual_ratio", "release_landed_frac"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and -1.0 <= v <= 1.0 and (name in ("gone_ncc", "found_ncc") or v > 0)):
-                from tcot_hybrid.errors import ConfigError
-
                 valid = "[-1, 1]" if name.endswith("ncc") else "(0, 1]"
                 raise ConfigError(f"supervisor.track.{name} must be in {valid}, got {v!r}")
 

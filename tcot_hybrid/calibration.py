@@ -27,8 +27,8 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from tcot_hybrid.camera import CameraModel
-from tcot_hybrid.config import require_int, require_positive
-from tcot_hybrid.errors import ConfigError, PlanningError
+from tcot_hybrid.config import require_bool, require_int, require_positive
+from tcot_hybrid.errors import PlanningError
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,8 +74,7 @@ class SelfCalibrationConfig:
     max_shift_m: float = 0.10
 
     def __post_init__(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError(f"self_calibration.enabled must be true or false, got {self.enabled!r}")
+        require_bool("self_calibration.enabled", self.enabled)
         for name in ("trigger_px", "pixel_sigma_px", "height_sigma_m", "prior_turn_deg", "prior_shift_m",
                      "consistent_px", "max_turn_deg", "max_shift_m", "home_tol_rad"):
             require_positive(f"self_calibration.{name}", getattr(self, name))

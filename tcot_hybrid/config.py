@@ -53,6 +53,12 @@ def require_int(field: str, value: Any, *, minimum: int | None = None) -> None:
         raise ConfigError(f"{field} must be >= {minimum}, got {short_repr(value)}")
 
 
+def require_bool(field: str, value: Any) -> None:
+    """Raise ConfigError unless ``value`` is True or False (not 1, not "yes")."""
+    if not isinstance(value, bool):
+        raise ConfigError(f"{field} must be true or false, got {short_repr(value)}")
+
+
 def require_choice(field: str, value: Any, choices: tuple[str, ...] | list[str]) -> None:
     """Raise ConfigError unless ``value`` is one of ``choices``."""
     if value not in choices:
@@ -161,8 +167,7 @@ def coerce_field(path: str, tp: Any, value: Any) -> Any:
             raise ConfigError(f"{path} must be an integer, got {short_repr(value)} ({type(value).__name__})")
         return value
     if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{path} must be true or false, got {short_repr(value)}")
+        require_bool(path, value)
         return value
     if tp is str:
         if not isinstance(value, str):
