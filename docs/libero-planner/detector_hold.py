@@ -46,17 +46,18 @@ def lines() -> list[str]:
            "time):", "",
            "| perturbation | as shipped | stopped early | never judged done | won / lost | wall as shipped [s] | "
            "wall never judged done [s] |", "|---|---|---|---|---|---|---|"]
+
+    def row(label: str, a: list[dict], b: list[dict], won_lost: str, bold: str = "") -> str:
+        early = sum(bool(e["premature_stop"]) for e in a)
+        wa, wb = (sum(e["wall_time_s"] for e in eps) for eps in (a, b))
+        fa, fb = (f"{bold}{dev_runs.frac(eps)}{bold}" for eps in (a, b))
+        return f"| {label} | {fa} | {early} | {fb} | {won_lost} | {wa:.0f} | {wb:.0f} |"
+
     for fam in sorted(by):
         a, b = by[fam][base], by[fam][other]
-        early = sum(bool(e["premature_stop"]) for e in a)
-        won_lost = dev_runs.won_lost({(e["task"], e["seed"]): e["success"] for e in a}, b)
-        out.append(f"| {fam} | {dev_runs.frac(a)} | {early} | {dev_runs.frac(b)} | {won_lost} | "
-                   f"{sum(e['wall_time_s'] for e in a):.0f} | {sum(e['wall_time_s'] for e in b):.0f} |")
-    every = {run: [e for fam in by.values() for e in fam[run]] for run in (base, other)}
-    early_all = sum(bool(e["premature_stop"]) for e in every[base])
-    wall = {run: sum(e["wall_time_s"] for e in eps) for run, eps in every.items()}
-    out.append(f"| all | **{dev_runs.frac(every[base])}** | {early_all} | **{dev_runs.frac(every[other])}** | | "
-               f"{wall[base]:.0f} | {wall[other]:.0f} |")
+        out.append(row(fam, a, b, dev_runs.won_lost({(e["task"], e["seed"]): e["success"] for e in a}, b)))
+    every = [[e for fam in by.values() for e in fam[run]] for run in (base, other)]
+    out.append(row("all", *every, "", bold="**"))
     out += dev_runs.command_lines("detector_hold.py", 2, ((name, cmd) for name, _, cmd in RUNS))
     return out
 
