@@ -105,12 +105,16 @@ class TrackConfig:
         require_bool("supervisor.track.releases", self.releases)
         for name in ("changed_level", "min_shift_px", "hand_clear_m", "placement_lift_m", "release_max_residual"):
             require_positive(f"supervisor.track.{name}", getattr(self, name))
-        for name in ("gone_ncc", "found_ncc", "changed_frac", "max_image_changed", "release_changed_frac",
-                     "release_residual_ratio", "release_landed_frac"):
+        # found_ncc = -1 would take the score look() gives "no changed spot" as a match
+        for name, lowest, closed in (("gone_ncc", -1.0, True), ("found_ncc", -1.0, False),
+                                     *((n, 0.0, False) for n in ("changed_frac", "max_image_changed",
+                                                                 "release_changed_frac", "release_residual_ratio",
+                                                                 "release_landed_frac"))):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and -1.0 <= v <= 1.0 and (name in ("gone_ncc", "found_ncc") or v > 0)):
-                valid = "[-1, 1]" if name.endswith("ncc") else "(0, 1]"
-                raise ConfigError(f"supervisor.track.{name} must be in {valid}, got {v!r}")
+            number = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            if not (number and (lowest <= v if closed else lowest < v) and v <= 1.0):
+                valid = f"{'[' if closed else '('}{lowest:g}, 1]"
+                raise ConfigError(f"supervisor.track.{name} must be a number in {valid}, got {v!r}")
 
     def enabled(self, world_kind: str) -> bool:
         return self.mode == "on" or (self.mode == "auto" and world_kind == "libero")
@@ -173,10 +177,10 @@ def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cf
     """Has the receptacle under the release pixel ``uv_px`` moved between ``before`` and ``after`` (module doc)?
     ``here`` and ``best`` are RMS colour differences (0-255) of the window's changed pixels with no shift and at the
     best shift. A receptacle near the image's edge whose changed pixels would shift off it is not found (the
-    cautious way: no move). None when the pixel is off the image, too little of its window changed to say, or the object the
-    plan grasps first (at ``grasp_uv_px`` in ``before``) is no longer as it was: more than ``changed_frac`` of the
-    pixels within ``patch_px`` of it changed. One change at a time: an object moved away from beside its plate changes
-    the plate's window as a moved plate does (and a hand at the object hides it)."""
+    cautious way: no move). None when the pixel is off the image, too little of its window changed to say, or the
+    object the plan grasps first (at ``grasp_uv_px`` in ``before``) is off the image or no longer as it was: more than
+    ``changed_frac`` of the pixels within ``patch_px`` of it changed. One change at a time: an object moved away from
+    beside its plate changes the plate's window as a moved plate does (and a hand at the object hides it)."""
     import cv2
 
     i0, i1, changed = _blurred_and_changed(before, after, cfg)
@@ -187,7 +191,7 @@ def look_receptacle(before: np.ndarray, after: np.ndarray, uv_px: np.ndarray, cf
     if grasp_uv_px is not None:
         yy, xx = np.mgrid[:H, :W]
         near = (xx - float(grasp_uv_px[0])) ** 2 + (yy - float(grasp_uv_px[1])) ** 2 <= cfg.patch_px ** 2
-        if near.any() and changed[near].mean() > cfg.changed_frac:
+        if not near.any() or changed[near].mean() > cfg.changed_frac:  # an object out of view cannot be judged
             return None
     w, r = cfg.release_window_px, cfg.search_px
     pad = w + r  # near the border the window and its search run off the image: padding that never matches
@@ -226,14 +230,20 @@ def shift_on_plane(camera, point_m: np.ndarray, uv_to: np.ndarray) -> np.ndarray
     return d
 
 
-def switch_neighbourhood(points: np.ndarray, switch: int) -> list[int]:
-    """Waypoint ``switch`` (where the gripper closes or opens) and the contiguous waypoints before and after it within
-    LIFT_XY_M sideways of it: the descent to it and the lift or retreat from it, which move with it."""
+def switch_neighbourhood(points: np.ndarray, gripper_closed: np.ndarray, switch: int) -> list[int]:
+    """Waypoint ``switch`` (the first with the gripper's new state) and the contiguous waypoints before and after it
+    within LIFT_XY_M sideways of it, up to the gripper's previous and next switch: the descent to it and the lift or
+    retreat from it, which move with it (a grasp just beside its release stays where it is)."""
     near = np.linalg.norm(points[:, :2] - points[switch, :2], axis=1) <= LIFT_XY_M
+    grip = np.asarray(gripper_closed, bool)
+
+    def a_switch(j: int) -> bool:
+        return j > 0 and grip[j] != grip[j - 1]
+
     lo, hi = switch, switch
-    while lo > 0 and near[lo - 1]:
+    while lo > 0 and near[lo - 1] and not a_switch(lo - 1):
         lo -= 1
-    while hi + 1 < len(points) and near[hi + 1]:
+    while hi + 1 < len(points) and near[hi + 1] and not a_switch(hi + 1):
         hi += 1
     return list(range(lo, hi + 1))
 
@@ -250,7 +260,7 @@ def shifted_plan(plan, camera, start: int, switch: int, shift_m: np.ndarray, ste
     cam = plan.lift_camera(camera)
     pts = cam.unproject(plan.uv_px, plan.depth_m)
     grip = np.asarray(plan.gripper_closed, bool)
-    moving = set(switch_neighbourhood(pts, switch)) | (set(range(start, switch + 1)) if approach else set())
+    moving = set(switch_neighbourhood(pts, grip, switch)) | (set(range(start, switch + 1)) if approach else set())
     pts[sorted(i for i in moving if i >= start)] += np.asarray(shift_m, float)
     uv, depth = cam.project(pts[start:])
     return WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=grip[start:], camera=plan.camera, kind=plan.kind,
@@ -275,6 +285,7 @@ class SwitchAnchor:
     grasp_uv_px: np.ndarray | None = None  # a release's: the pixel of the grasp before it (look_receptacle)
     candidate: np.ndarray | None = None  # where the last look found it moved to [px]
     seen: int = 0            # consecutive looks that found it there
+    refused: bool = False    # the executor refused the plan shifted with it: not offered again
 
     def done(self, executor) -> bool:
         return executor.closes != self.closes
@@ -307,8 +318,8 @@ def switch_anchors(plan, executor, image: np.ndarray, cfg: TrackConfig) -> list[
     uv, depth = cam.project(executor.points[[i for _, i in wanted]])
     out = []
     for (kind, i), uv_i, depth_i in zip(wanted, uv, depth):
-        if depth_i > 0:
+        if depth_i > 0 and depth[0] > 0:  # a placement is judged only beside its grasp's pixel (look_receptacle)
             out.append(SwitchAnchor(kind=kind, plan=plan, image=image, point_m=executor.points[i].copy(), uv_px=uv_i,
                                     plan_index=int(executor.point_source[i]), closes=executor.closes,
-                                    grasp_uv_px=uv[0] if kind == "release" and depth[0] > 0 else None))
+                                    grasp_uv_px=uv[0] if kind == "release" else None))
     return out

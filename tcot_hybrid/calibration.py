@@ -49,10 +49,12 @@ class SelfCalibrationConfig:
                     [deg, m]: how far a fixed camera is believed to be knocked. Up: trusts the sightings more.
     max_points:     sightings kept (the newest); one per planner step at most.
     min_points, home_tol_rad: a fit needs ``min_points`` sightings, unless one of them was taken with the arm at
-                    its home posture (every joint within ``home_tol_rad`` [rad]), where every demonstration starts and
-                    the network reads the hand best. Elsewhere one sighting cannot tell a knocked camera from a hand
-                    read wrongly: an arm started 0.2 rad off its posture (``init_posture``) was read 5-9 px off, and a
-                    one-sighting fit on it sent every plan astray. Up: waits for more evidence.
+                    its home posture (every joint within ``home_tol_rad`` [rad]), where every demonstration starts
+                    (exactly: a sampled layout starts 0 rad from it) and the network reads the hand best. Elsewhere
+                    one sighting cannot tell a knocked camera from a hand read wrongly: an arm started 0.2 rad off its
+                    posture (``init_posture``) was read 5-9 px off, and so, 4-7 px, were arms on LIBERO's shipped init
+                    states, whose joints start 0.01-0.05 rad off home; a one-sighting fit on them sent every plan
+                    astray. Up: one sighting trusted further from where the network learned the hand.
     consistent_px, max_turn_deg, max_shift_m: a fitted pose is taken only when it explains the sightings (their
                     median distance from its projection of the TCP at most ``consistent_px`` [px]) with a correction
                     no larger than ``max_turn_deg`` [deg] and ``max_shift_m`` [m]; otherwise the disagreement is not
@@ -68,7 +70,7 @@ class SelfCalibrationConfig:
     prior_shift_m: float = 0.05
     max_points: int = 40
     min_points: int = 3
-    home_tol_rad: float = 0.05
+    home_tol_rad: float = 0.005
     consistent_px: float = 3.0
     max_turn_deg: float = 10.0
     max_shift_m: float = 0.10

@@ -229,8 +229,10 @@ class EpisodeRunner:
             if d.reset:
                 self._reset_scene()
             if d.plan is not None:  # the supervisor made the plan already (confirm_success, a tracked grasp)
-                if ex.set_plan(d.plan):
+                taken = ex.set_plan(d.plan)
+                if taken:
                     self.plans.append(d.plan)
+                self.supervisor.plan_outcome(d.plan, taken)
             elif d.plan_mode is not None:
                 self._plan(step, d.plan_mode)
         for _ in range(self.cfg.timing.ticks_per_plan):

@@ -210,7 +210,8 @@ class Supervisor:
         self.track = config.track.enabled(world_kind) and config.mode in ("glsr", "glsr_reset")
         self._plan_image = None  # the image the global plan being followed was made (or last shifted) from
         self._anchors: list = []  # its next grasp and placement (anchors.SwitchAnchor)
-        self.tracked = {"grasp": 0, "release": 0}  # plans shifted, by what moved
+        self.tracked = {"grasp": 0, "release": 0}  # plans shifted (and taken by the executor), by what moved
+        self._offered = None  # (shifted plan, its image, its anchor) until the runner says whether it was taken
         self.state = "start"
         self.resets = 0
         self.replans = 0
@@ -314,7 +315,8 @@ class Supervisor:
         if step % tc.every_steps:
             return None
         tcp = executor.sim.tcp_pos()
-        live = [a for a in self._anchors if not a.done(executor) and np.linalg.norm(tcp - a.point_m) >= tc.hand_clear_m]
+        live = [a for a in self._anchors if not a.done(executor) and not a.refused
+                and np.linalg.norm(tcp - a.point_m) >= tc.hand_clear_m]
         if not live:
             return None
         image = observe().image
@@ -332,13 +334,28 @@ class Supervisor:
             start = int(executor.point_source[executor.index])
             moved = shifted_plan(plan, executor.camera, start, max(a.plan_index, start), shift, step,
                                  approach=a.kind == "grasp")
-            self.tracked[a.kind] += 1
-            self._plan_image = image  # the shifted plan's anchors see the scene as it is now
+            a.candidate, a.seen = None, 0
+            self._offered = (moved, image, a)  # counted once taken (plan_outcome)
             ev = self._event(step, reason=f"{a.kind}_tracked", plan="global")
             return Decision("global", False, {**ev, "shift_m": np.round(shift, 4).tolist(),
                                               "score_here": round(seen.here, 3), "score_found": round(seen.best, 3),
                                               "image_changed": round(seen.image_changed, 4)}, moved)
         return None
+
+    def plan_outcome(self, plan, taken: bool) -> None:
+        """The runner's word on a plan this supervisor made (a tracked shift, a local plan overruling the detector):
+        whether the executor took it (``Executor.set_plan``). A shift is counted, and its image becomes what the
+        anchors compare with, only once taken; one the executor refused (off the image, IK infeasible; its own event
+        says why) is not offered again for that anchor."""
+        if self._offered is None or self._offered[0] is not plan:
+            return
+        _, image, anchor = self._offered
+        self._offered = None
+        if taken:
+            self.tracked[anchor.kind] += 1
+            self._plan_image = image  # the shifted plan's anchors see the scene as it is now
+        else:
+            anchor.refused = True
 
     def in_global_phase(self, step: int, executor) -> bool:
         """Before failure detection starts (``--stop-on detector`` asks from then on): step < t_f, or with t_f "plan"

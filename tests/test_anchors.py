@@ -116,6 +116,19 @@ def test_a_release_moves_with_its_descent_and_retreat_and_the_carry_stays():
     assert np.allclose(got, want, atol=1e-9)
 
 
+def test_a_release_beside_its_grasp_moves_without_the_grasp():
+    # put down 1.5 cm from where it was picked up: the plate moved, the object did not
+    pts = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0.03], [0.55, 0.05, 0.03],
+                    [0.55, 0.05, 0.12], [0.565, 0.05, 0.05], [0.565, 0.05, 0.15]])
+    grip = [False, False, False, True, True, False, False]
+    slide = np.array([-0.04, 0.09, 0.0])
+    got = FRONT.unproject(*(lambda m: (m.uv_px, m.depth_m))(
+        shifted_plan(_plan(pts, grip), FRONT, 1, 5, slide, step=3, approach=False)))
+    want = pts[1:].copy()
+    want[3:] += slide  # the lift's top, the release and the retreat; the grasp (3) and its descent stay
+    assert np.allclose(got, want, atol=1e-9)
+
+
 def test_a_featureless_plate_that_moved_is_found_where_it_went():
     before = plate(TABLE, (60, 70))
     after = plate(TABLE, (52, 84))
@@ -138,7 +151,9 @@ def test_a_plate_that_stayed_is_not_looked_at_and_a_move_onto_nothing_is_no_move
 @pytest.mark.parametrize("kw", [dict(mode="always"), dict(every_steps=0), dict(found_ncc=1.5),
                                 dict(changed_frac=0.0), dict(max_moves=-1), dict(hand_clear_m=0.0),
                                 dict(releases="yes"), dict(placement_lift_m=0.0), dict(release_window_px=0),
-                                dict(release_residual_ratio=1.5), dict(release_landed_frac=0.0)])
+                                dict(release_residual_ratio=1.5), dict(release_landed_frac=0.0),
+                                dict(found_ncc=-1.0), dict(changed_frac=True), dict(release_landed_frac=True),
+                                dict(gone_ncc="0.5")])
 def test_bad_tracking_settings_are_refused_by_name(kw):
     with pytest.raises(ConfigError, match=next(iter(kw))):
         TrackConfig(**kw)
@@ -162,3 +177,5 @@ def test_a_plate_is_not_judged_while_the_object_to_grasp_has_moved_too():
     still[66:75, 78:87] = OBJ
     seen = look_receptacle(before, still, rim, CFG, grasp_uv_px=np.array([82.0, 70.0]))
     assert seen is not None and seen.moved
+    # an object to grasp out of view cannot be judged unchanged: no plate is judged beside it
+    assert look_receptacle(before, still, rim, CFG, grasp_uv_px=np.array([-40.0, 70.0])) is None

@@ -115,6 +115,7 @@ def test_registry_lists_the_backends_and_rejects_unknown_names():
         ("limit_margin_rad", -0.01),
         ("posture_target", "elbow_up"),
         ("collision_avoidance", "yes"),
+        ("collision_avoidance", 1),
         ("table_clearance_m", -0.01),
     ],
 )

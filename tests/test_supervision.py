@@ -546,9 +546,12 @@ PICK_AND_PLACE = np.array([[0.45, 0.0, 0.30], [0.55, 0.05, 0.12], [0.55, 0.05, 0
 PICK_AND_PLACE_GRIP = np.array([False, False, False, True, True, True, False])
 
 
-def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PICK_AND_PLACE, track=None):
+def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PICK_AND_PLACE, track=None,
+                  executor_takes=True):
     """GLSR following a frozen global plan (approach, grasp at 3, lift, carry, release at 6) while the object under
-    its grasp slides by ``slide`` (and a plate under its release by ``plate_slide``) after the plan's image."""
+    its grasp slides by ``slide`` (and a plate under its release by ``plate_slide``) after the plan's image;
+    ``executor_takes`` False: the executor refuses every plan the supervisor makes (as set_plan does one whose pixels
+    leave the image or whose IK is infeasible)."""
     from test_anchors import OBJ, TABLE, plate
     from test_lift import FRONT
 
@@ -582,8 +585,10 @@ def _tracking_run(slide, steps=8, closes_after_start=0, plate_slide=None, pts=PI
         out.append(sup.decide(t, observe=lambda: Obs(after), executor=ex))
         if t == 1:  # the anchors are made at the first step the plan is followed; then the hand may close
             ex.closes += closes_after_start
-        if out[-1].plan is not None:  # adopted, as EpisodeRunner does
-            ex.set_plan(out[-1].plan)
+        if out[-1].plan is not None:  # adopted or refused, and the supervisor told, as EpisodeRunner does
+            if executor_takes:
+                ex.set_plan(out[-1].plan)
+            sup.plan_outcome(out[-1].plan, executor_takes)
     return pts, out, sup
 
 
@@ -599,7 +604,12 @@ def test_a_grasp_whose_object_moved_is_shifted_with_it_once_two_looks_agree():
     got = FRONT.unproject(d.plan.uv_px, d.plan.depth_m)
     assert np.linalg.norm(got[3] - (pts[3] + slide)) < 0.02  # the grasp, within the two roundings to a pixel (1 cm here)
     assert np.allclose(got[6], pts[6])  # the release stays
-    assert len(ds) == 8  # and the shifted plan, seen from the image it was shifted in, is followed on
+
+
+def test_a_shift_the_executor_refuses_is_not_counted_and_not_offered_again():
+    _, ds, sup = _tracking_run(np.array([0.06, -0.05, 0.0]), steps=16, executor_takes=False)
+    assert [t for t, d in enumerate(ds) if d.plan is not None] == [4]  # once, not every second look after
+    assert sup.tracked == {"grasp": 0, "release": 0}
 
 
 def test_a_grasp_whose_object_stayed_is_left_alone():
@@ -652,3 +662,26 @@ def test_a_release_shift_counts_against_the_moves_budget():
     _, ds, sup = _tracking_run(np.zeros(3), steps=12, plate_slide=np.array([-0.04, 0.09, 0.0]),
                                track=TrackConfig(max_moves=0))
     assert all(d.plan is None for d in ds) and sum(sup.tracked.values()) == 0
+
+
+def test_the_runner_tells_the_supervisor_whether_the_executor_took_its_plan():
+    # a tracked shift is counted only once taken (Supervisor.plan_outcome): the runner must report refusals too
+    import dataclasses
+
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+    from tcot_hybrid.supervision import Decision
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0))
+    r.settle()
+    r._step_once(0, may_plan=True)
+    first = r.stack.executor.plan
+    off_image = dataclasses.replace(first, uv_px=first.uv_px + 5000.0, step=1)  # cannot be lifted: refused
+    again = dataclasses.replace(first, step=2)
+    told = []
+    r.supervisor.plan_outcome = lambda plan, taken: told.append((plan, taken))
+    for step, plan in ((1, off_image), (2, again)):
+        r.supervisor.decide = lambda *a, plan=plan, **k: Decision("global", False, None, plan)
+        r._step_once(step, may_plan=True)
+    assert [(p is off_image, p is again, taken) for p, taken in told] == [(True, False, False), (False, True, True)]
+    assert r.stack.executor.plan is again

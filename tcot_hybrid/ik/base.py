@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, ClassVar, NamedTuple
 import numpy as np
 
 from tcot_hybrid.config import (
+    require_bool,
     require_choice,
     require_finite,
     require_int,
@@ -195,8 +196,7 @@ class IKConfig:
             raise ConfigError(f"velocity_scale must be in (0, 1], got {self.velocity_scale!r}")
         require_choice("posture_target", self.posture_target, POSTURE_TARGETS)
         require_choice("solver", self.solver, _qp_solvers())
-        if not isinstance(self.collision_avoidance, bool):
-            raise ConfigError(f"collision_avoidance must be a bool, got {self.collision_avoidance!r}")
+        require_bool("collision_avoidance", self.collision_avoidance)
         if not isinstance(self.casadi, CasadiConfig):
             raise ConfigError(f"casadi must be a CasadiConfig (ik_params.casadi.*), got {self.casadi!r}")
 
