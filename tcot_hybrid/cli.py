@@ -119,12 +119,7 @@ def robot_given(argv: list[str], base: RunConfig) -> bool:
 
 def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
     """Record of a run that failed before its stack existed: what was asked, why it stopped, the hashes."""
-    import platform
-
-    import mujoco
-
-    from tcot_hybrid import __version__
-    from tcot_hybrid.episode import file_digest
+    from tcot_hybrid.episode import file_digest, run_environment
     from tcot_hybrid.planners import planner_checkpoint
     from tcot_hybrid.tasks import make_task
 
@@ -144,8 +139,7 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
             "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
             "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint,
                                                                   suite=make_task(cfg.task).suite)),
-            "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
-                         "python": platform.python_version()}}
+            "versions": run_environment()}
 
 
 def outcome(record: dict) -> str:

@@ -401,9 +401,30 @@ class EpisodeRunner:
             "robot_model_hash": file_digest(s.robot.mjcf_path),
             "checkpoint": str(ck) if ck is not None else None,  # the file actually loaded (default or --checkpoint)
             "checkpoint_hash": file_digest(ck) if ck is not None else None,
-            "versions": {"tcot_hybrid": __version__, "mujoco": mujoco.__version__,
-                         "python": platform.python_version()},
+            "versions": run_environment(),
         }
+
+
+def run_environment() -> dict:
+    """What an episode ran on: the package versions and the CPU. LIBERO episodes repeat exactly on one machine, not
+    across machines (docs/libero-planner.md, "What is left": the same code on a new machine), so a record names its
+    machine's CPU model and whether it has AVX-512."""
+    from importlib import metadata
+
+    try:
+        info = dict(line.split(":", 1) for line in Path("/proc/cpuinfo").read_text().splitlines() if ":" in line)
+    except OSError:  # not Linux: the names platform knows
+        info = {}
+    info = {k.strip(): v.strip() for k, v in info.items()}  # every CPU repeats the same lines: the last is kept
+    cpu = info.get("model name") or platform.processor() or platform.machine()
+    avx512 = "avx512f" in info["flags"].split() if "flags" in info else None
+    out = {"tcot_hybrid": __version__, "mujoco": mujoco.__version__, "numpy": np.__version__,
+           "python": platform.python_version(), "cpu": cpu, "avx512": avx512}
+    try:
+        out["torch"] = metadata.version("torch")  # without importing it (an oracle run never loads torch)
+    except metadata.PackageNotFoundError:
+        pass
+    return out
 
 
 def write_record(record: dict, out_dir: str | Path) -> Path:

@@ -36,6 +36,9 @@ def test_run_writes_the_episode_record(tmp_path):
         assert key in rec, key
     assert rec["success"] is True and rec["max_joint_limit_violation_rad"] == 0.0
     assert "SUCCESS" in r.stdout
+    # what it ran on: episodes repeat exactly on one machine, not across machines
+    assert {"tcot_hybrid", "mujoco", "numpy", "python", "cpu", "avx512"} <= set(rec["versions"])
+    assert rec["versions"]["cpu"] and rec["versions"]["avx512"] in (True, False, None)
 
 
 @pytest.mark.parametrize("args, fragment", [
