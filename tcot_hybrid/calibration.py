@@ -52,8 +52,8 @@ class SelfCalibrationConfig:
                     its home posture (every joint within ``home_tol_rad`` [rad]), where every demonstration starts
                     (exactly: a sampled layout starts 0 rad from it) and the network reads the hand best. Elsewhere
                     one sighting cannot tell a knocked camera from a hand read wrongly: an arm started 0.2 rad off its
-                    posture (``init_posture``) was read 5-9 px off, and so, 4-7 px, were arms on LIBERO's shipped init
-                    states, whose joints start 0.01-0.05 rad off home; a one-sighting fit on them sent every plan
+                    posture (``init_posture``) was read 5-9 px off, and arms on LIBERO's shipped init states, whose
+                    joints start 0.01-0.05 rad off home, up to 5 px; a one-sighting fit on them sent every plan
                     astray. Up: one sighting trusted further from where the network learned the hand.
     consistent_px, max_turn_deg, max_shift_m: a fitted pose is taken only when it explains the sightings (their
                     median distance from its projection of the TCP at most ``consistent_px`` [px]) with a correction

@@ -5,6 +5,7 @@ reported as a success.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import platform
@@ -408,7 +409,12 @@ class EpisodeRunner:
 def run_environment() -> dict:
     """What an episode ran on: the package versions and the CPU. LIBERO episodes repeat exactly on one machine, not
     across machines (docs/libero-planner.md, "What is left": the same code on a new machine), so a record names its
-    machine's CPU model and whether it has AVX-512."""
+    machine's CPU model and whether it has AVX-512. Read once per process; each record gets its own copy."""
+    return dict(_run_environment())
+
+
+@functools.cache
+def _run_environment() -> dict:
     from importlib import metadata
 
     try:
