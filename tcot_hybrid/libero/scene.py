@@ -85,9 +85,9 @@ def _env_class(problem_name: str):
 _IDLE: dict[tuple[str, float], "LiberoScene"] = {}
 BUILD_SEED = 0  # numpy seed for LIBERO's fixture placement when a scene is built
 # [rad] std of the gaussian offset from home on each arm joint of a sampled layout: robosuite's default
-# initialization noise (gaussian, 0.02). LIBERO's shipped init states start so (0.01-0.05 rad off home on
-# every joint measured), while its own evaluation wrapper, and this stack before stop 49, reset the arm
-# exactly to home: a planner developed and trained on such layouts had never seen the test set's starts.
+# initialization noise (gaussian, 0.02). LIBERO's shipped init states start so (largest joint 0.01-0.05 rad
+# off home on the 20 read), while its own evaluation wrapper, and this stack before stop 49, reset the arm
+# exactly to home: development layouts and demonstrations never showed the test set's starts.
 ARM_START_NOISE_RAD = 0.02
 ARM_NOISE_STREAM = 1  # the arm's noise is drawn from numpy Generator([seed, ARM_NOISE_STREAM])
 
@@ -219,7 +219,6 @@ class LiberoScene:
         arm = np.asarray(self.env.robots[0]._ref_joint_pos_indexes)
         noise = np.random.default_rng([seed % 2**32, ARM_NOISE_STREAM]).normal(0.0, arm_noise_rad, arm.size)
         self.data.qpos[arm] += noise
-        self.data.qvel[:] = 0.0
         mujoco.mj_forward(self.model, self.data)
 
     def table_regions(self) -> dict:
