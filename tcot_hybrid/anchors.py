@@ -31,8 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tcot_hybrid.config import require_bool, require_choice, require_int, require_positive
-from tcot_hybrid.errors import ConfigError
+from tcot_hybrid.config import require_bool, require_choice, require_in_range, require_int, require_positive
 
 TRACK_MODES = ("auto", "on", "off")
 LIFT_XY_M = 0.02  # waypoints this close sideways to a switch are its descent and lift or retreat: they move with it [m]
@@ -110,11 +109,7 @@ class TrackConfig:
                                      *((n, 0.0, False) for n in ("changed_frac", "max_image_changed",
                                                                  "release_changed_frac", "release_residual_ratio",
                                                                  "release_landed_frac"))):
-            v = getattr(self, name)
-            number = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-            if not (number and (lowest <= v if closed else lowest < v) and v <= 1.0):
-                valid = f"{'[' if closed else '('}{lowest:g}, 1]"
-                raise ConfigError(f"supervisor.track.{name} must be a number in {valid}, got {v!r}")
+            require_in_range(f"supervisor.track.{name}", getattr(self, name), lowest, 1.0, low_closed=closed)
 
     def enabled(self, world_kind: str) -> bool:
         return self.mode == "on" or (self.mode == "auto" and world_kind == "libero")

@@ -45,6 +45,19 @@ def require_nonnegative(field: str, value: Any) -> None:
         raise ConfigError(f"{field} must be >= 0, got {short_repr(value)}")
 
 
+def require_in_range(field: str, value: Any, low: float, high: float, *, low_closed: bool = True,
+                     high_closed: bool = True, meaning: str = "") -> None:
+    """Raise ConfigError unless ``value`` is a number (not bool, not NaN) in the interval from ``low`` to ``high``,
+    each end included or not; the message names the interval and, when given, what the number is (``meaning``)."""
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    above = number and (low <= value if low_closed else low < value)
+    below = number and (value <= high if high_closed else value < high)
+    if not (above and below):
+        interval = f"{'[' if low_closed else '('}{low:g}, {high:g}{']' if high_closed else ')'}"
+        what = f" ({meaning})" if meaning else ""
+        raise ConfigError(f"{field} must be a number in {interval}{what}, got {short_repr(value)}")
+
+
 def require_int(field: str, value: Any, *, minimum: int | None = None) -> None:
     """Raise ConfigError unless ``value`` is an int (not bool) and >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):

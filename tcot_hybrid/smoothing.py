@@ -33,8 +33,8 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 import ruckig
 
-from tcot_hybrid.config import require_positive
-from tcot_hybrid.errors import ConfigError, TrajectoryError
+from tcot_hybrid.config import require_in_range, require_positive
+from tcot_hybrid.errors import TrajectoryError
 
 # Ruckig's sampled states can exceed a bound by rounding only; anything larger is a real excursion.
 _LIMIT_TOL = 1e-10
@@ -69,16 +69,12 @@ class SmoothingConfig:
 
     def __post_init__(self) -> None:
         for name in ("velocity_scale", "acceleration_scale", "jerk_scale"):
-            value = getattr(self, name)
-            require_positive(name, value)
-            if value > 1.0:
-                raise ConfigError(f"{name} must be in (0, 1] (a fraction of the robot's limit), got {value!r}")
+            require_in_range(name, getattr(self, name), 0.0, 1.0, low_closed=False,
+                             meaning="a fraction of the robot's limit")
         require_positive("start_tolerance_rad", self.start_tolerance_rad)
         if self.torque_fraction is not None:
-            require_positive("torque_fraction", self.torque_fraction)
-            if self.torque_fraction > 1.0:
-                raise ConfigError(f"torque_fraction must be in (0, 1] (a share of tau_max) or None, got "
-                                  f"{self.torque_fraction!r}")
+            require_in_range("torque_fraction", self.torque_fraction, 0.0, 1.0, low_closed=False,
+                             meaning="a share of tau_max, or None")
 
 
 class JointReference(NamedTuple):

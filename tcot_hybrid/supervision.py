@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
 from tcot_hybrid.anchors import TrackConfig
-from tcot_hybrid.config import require_choice, require_int, require_positive
+from tcot_hybrid.config import require_choice, require_in_range, require_int, require_positive
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
 CONFIRM_SUCCESS = ("auto", "off", "local_plan")
@@ -165,10 +165,7 @@ class SupervisorConfig:
             require_int("supervisor.t_f", self.t_f, minimum=0)
         require_int("supervisor.t_l", self.t_l, minimum=1)
         require_positive("supervisor.success_threshold", self.success_threshold)
-        if not 0.0 < self.success_threshold <= 1.0:
-            from tcot_hybrid.errors import ConfigError
-
-            raise ConfigError(f"supervisor.success_threshold must be in (0, 1], got {self.success_threshold}")
+        require_in_range("supervisor.success_threshold", self.success_threshold, 0.0, 1.0, low_closed=False)
         require_int("supervisor.max_resets", self.max_resets, minimum=0)
         if self.max_plan_latency_s is not None:
             require_positive("supervisor.max_plan_latency_s", self.max_plan_latency_s)

@@ -7,8 +7,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tcot_hybrid.config import require_choice, require_int, require_positive
-from tcot_hybrid.errors import ConfigError, DatasetError
+from tcot_hybrid.config import require_choice, require_in_range, require_int, require_positive
+from tcot_hybrid.errors import DatasetError
 
 # --- 3. RANSAC fit of an uncalibrated projection ------------------------------------------------------
 
@@ -44,8 +44,7 @@ class RansacConfig:
         require_choice("ransac.fit", self.fit, ("file", "demo"))
         require_int("ransac.min_inliers", self.min_inliers, minimum=6)
         require_positive("ransac.min_thickness", self.min_thickness)
-        if not 0 < self.min_inlier_fraction <= 1:
-            raise ConfigError(f"ransac.min_inlier_fraction must be in (0, 1], got {self.min_inlier_fraction}")
+        require_in_range("ransac.min_inlier_fraction", self.min_inlier_fraction, 0.0, 1.0, low_closed=False)
         require_int("ransac.seed", self.seed, minimum=0)
 
 

@@ -26,6 +26,7 @@ from tcot_hybrid.config import (
     require_bool,
     require_choice,
     require_finite,
+    require_in_range,
     require_int,
     require_nonnegative,
     require_positive,
@@ -192,8 +193,7 @@ class IKConfig:
             require_positive(name, getattr(self, name))
         for name in ("posture_cost", "orientation_cost", "limit_margin_rad", "table_clearance_m"):
             require_nonnegative(name, getattr(self, name))
-        if self.velocity_scale > 1.0:
-            raise ConfigError(f"velocity_scale must be in (0, 1], got {self.velocity_scale!r}")
+        require_in_range("velocity_scale", self.velocity_scale, 0.0, 1.0, low_closed=False)
         require_choice("posture_target", self.posture_target, POSTURE_TARGETS)
         require_choice("solver", self.solver, _qp_solvers())
         require_bool("collision_avoidance", self.collision_avoidance)

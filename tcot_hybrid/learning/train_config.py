@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tcot_hybrid.config import require_choice, require_int, require_nonnegative, require_positive
+from tcot_hybrid.config import require_choice, require_in_range, require_int, require_nonnegative, require_positive
 from tcot_hybrid.data.labels import TrajectoryWindowConfig
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.learning.model import ModelConfig
@@ -193,15 +193,13 @@ class TrainConfig:
         if self.epoch_samples is not None:
             require_int("epoch_samples", self.epoch_samples, minimum=self.batch_size)
         for name in ("global_t0_frac", "recovery_frac"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ConfigError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+            require_in_range(name, getattr(self, name), 0.0, 1.0)
         require_int("stage1_epochs", self.stage1_epochs, minimum=0)
         for name in ("lr", "max_minutes"):
             require_positive(name, getattr(self, name))
         for name in ("weight_decay", "heatmap_ce"):
             require_nonnegative(name, getattr(self, name))
-        if not 0 <= self.max_unknown_fraction < 1:
-            raise ConfigError(f"max_unknown_fraction must be in [0, 1), got {self.max_unknown_fraction}")
+        require_in_range("max_unknown_fraction", self.max_unknown_fraction, 0.0, 1.0, high_closed=False)
         if not str(self.out).endswith(".safetensors"):
             raise ConfigError(f"out must end in .safetensors, got {self.out!r}")
         if self.kind == "direct" and self.model.kind != "direct":

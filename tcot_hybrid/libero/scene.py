@@ -84,6 +84,12 @@ def _env_class(problem_name: str):
 # (no two simulations ever share one) and puts it back when it closes.
 _IDLE: dict[tuple[str, float], "LiberoScene"] = {}
 BUILD_SEED = 0  # numpy seed for LIBERO's fixture placement when a scene is built
+# [rad] std of the gaussian offset from home on each arm joint of a sampled layout: robosuite's default
+# initialization noise (gaussian, 0.02). LIBERO's shipped init states start so (largest joint 0.01-0.05 rad
+# off home on the 20 read), while its own evaluation wrapper, and this stack before stop 49, reset the arm
+# exactly to home: development layouts and demonstrations never showed the test set's starts.
+ARM_START_NOISE_RAD = 0.02
+ARM_NOISE_STREAM = 1  # the arm's noise is drawn from numpy Generator([seed, ARM_NOISE_STREAM])
 
 
 @dataclass(frozen=True)
@@ -176,10 +182,17 @@ class LiberoScene:
         return scene
 
     # --- layouts ----------------------------------------------------------------------------------------
-    def sample_layout(self, seed: int, spread: "LayoutSpread | None" = None) -> None:
+    def sample_layout(self, seed: int, spread: "LayoutSpread | None" = None, *,
+                      arm_noise_rad: float | None = None) -> None:
         """A fresh layout from the task file's placement regions (LIBERO's own sampler), seeded. The sampler
         draws from numpy's global generator, so it is seeded here and restored afterwards. ``spread`` moves
-        the table regions of the movable objects (see :class:`LayoutSpread`) for this layout only."""
+        the table regions of the movable objects (see :class:`LayoutSpread`) for this layout only. The arm
+        starts off home by a gaussian of std ``arm_noise_rad`` on each joint (None: ``ARM_START_NOISE_RAD``),
+        drawn from its own generator so that the objects stand where they did without it."""
+        if arm_noise_rad is None:
+            arm_noise_rad = ARM_START_NOISE_RAD
+        if not (np.isfinite(arm_noise_rad) and 0.0 <= arm_noise_rad <= 0.2):
+            raise ValueError(f"arm_noise_rad = {arm_noise_rad!r} must be in [0, 0.2] rad")
         from robosuite.utils.errors import RandomizationError
 
         state = np.random.get_state()
@@ -203,6 +216,10 @@ class LiberoScene:
                 sampler.x_ranges, sampler.y_ranges = x_ranges, y_ranges
         if self.env.sim.model._model is not self.model or self.env.sim.data._data is not self.data:
             raise RuntimeError("LIBERO rebuilt its simulation on reset (hard_reset must stay off)")
+        arm = np.asarray(self.env.robots[0]._ref_joint_pos_indexes)
+        noise = np.random.default_rng([seed % 2**32, ARM_NOISE_STREAM]).normal(0.0, arm_noise_rad, arm.size)
+        self.data.qpos[arm] += noise
+        mujoco.mj_forward(self.model, self.data)
 
     def table_regions(self) -> dict:
         """The placement samplers that put the task's movable objects on the table (not inside or on top of

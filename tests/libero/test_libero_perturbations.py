@@ -60,10 +60,14 @@ def test_object_moved_translates_a_libero_object_and_keeps_it_upright():
     assert float(np.trace(rot_before.T @ world.rot("ketchup_1"))) > 2.97  # same orientation (within ~8 degrees)
 
 
-def test_camera_shift_first_learned_plan_is_lifted_with_a_camera_nearer_the_moved_one():
+def test_camera_shift_first_learned_plan_is_lifted_with_a_camera_nearer_the_moved_one(monkeypatch):
     """The planner camera is knocked before the first plan; the learned planner sees the hand where the moved
-    camera puts it and lifts its global plan with a re-estimated pose, nearer the moved camera than the nominal."""
+    camera puts it and lifts its global plan with a re-estimated pose, nearer the moved camera than the nominal.
+    One sighting is trusted only with the arm at home, so this layout starts the arm there (no start noise)."""
     from tcot_hybrid.camera import CameraModel
+    from tcot_hybrid.libero import scene
+
+    monkeypatch.setattr(scene, "ARM_START_NOISE_RAD", 0.0)
 
     cfg = RunConfig(task=BOWL, seed=20000, init="sampled", planner="learned",
                     perturb=PerturbConfig(name="camera_shift"))

@@ -134,6 +134,33 @@ def test_sampled_layouts_are_seeded(libero_runner):
     np.testing.assert_array_equal(np.random.get_state()[1][:5], state)  # numpy's global generator restored
 
 
+def test_sampled_layouts_start_the_arm_off_home_as_libero_does(libero_runner):
+    """The arm starts with robosuite's default joint noise (gaussian, ARM_START_NOISE_RAD), like LIBERO's shipped
+    init states; the noise has its own generator, so the objects stand where a noise-free layout puts them."""
+    from tcot_hybrid.libero.scene import ARM_START_NOISE_RAD
+
+    task, sim = libero_runner.stack.task, libero_runner.stack.sim
+    spec = libero_runner.stack.robot
+    offsets = []
+    for seed in range(40, 52):
+        task.set_episode(seed=seed, init="sampled")
+        sim.reset(np.random.default_rng(seed))
+        q = sim.q
+        assert np.all(q > spec.q_min) and np.all(q < spec.q_max)
+        offsets.append(q - spec.home_q)
+        noisy = sim.data.qpos.copy()
+        task.scene.sample_layout(seed, arm_noise_rad=0.0)
+        quiet = sim.data.qpos.copy()
+        np.testing.assert_allclose(quiet[sim.arm_qpos], spec.home_q, atol=1e-9)
+        others = np.setdiff1d(np.arange(sim.model.nq), sim.arm_qpos)
+        np.testing.assert_array_equal(noisy[others], quiet[others])  # the objects did not move
+    offsets = np.array(offsets)
+    assert 0.5 * ARM_START_NOISE_RAD < offsets.std() < 1.5 * ARM_START_NOISE_RAD
+    assert np.abs(offsets).max(axis=1).min() > 0.005  # no start counts as home (self-calibration's home_tol_rad)
+    with pytest.raises(ValueError, match="arm_noise_rad"):
+        task.scene.sample_layout(40, arm_noise_rad=-0.1)
+
+
 def test_spread_layouts_move_the_arrangement_and_leave_libero_regions_as_compiled(libero_runner):
     """``--init spread``: the whole arrangement moves (up to LAYOUT_SPREAD.shift_m) while the objects keep their
     relations to within the grown regions; seeded like sampled layouts, and LIBERO's regions are put back."""
