@@ -40,6 +40,10 @@ EVAL = HERE / "eval-protocol"
 # each suite's own shipped model, one folder per suite (Makefile libero-protocol-suite)
 SUITE_EVAL = HERE / "eval-protocol-suite"
 SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; `libero_panda_<suite>`, where shipped)"
+# what `tcot eval` runs without --checkpoint: the suite-model row's episodes where a suite has its own model, the
+# four-suite GLSR row's elsewhere
+DEFAULTS_ROW = ("GLSR at the stack's defaults (no `--checkpoint`: a suite's own model where one is shipped, the "
+                "four-suite model elsewhere)")
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
@@ -277,6 +281,12 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
         got = _suite_counts(suite_eps)
         lines.append(f"| ours: {SUITE_ROW} | " + " | ".join(rate(*got[s]) if got[s][1] else "-" for s in SUITES)
                      + f" | {_average(got)} |")
+        glsr = by.get(("learned", "glsr"))
+        if glsr:
+            own = {e["suite"] for e in suite_eps}
+            got = _suite_counts(suite_eps + [e for e in glsr if e["suite"] not in own])
+            lines.append(f"| ours: {DEFAULTS_ROW} | " + " | ".join(rate(*got[s]) for s in SUITES)
+                         + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
     if oracle:
         lines.append("| oracle: privileged script (`docs/eval-libero/oracle-shipped/`) | "
