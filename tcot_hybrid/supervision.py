@@ -164,7 +164,6 @@ class SupervisorConfig:
         else:
             require_int("supervisor.t_f", self.t_f, minimum=0)
         require_int("supervisor.t_l", self.t_l, minimum=1)
-        require_positive("supervisor.success_threshold", self.success_threshold)
         require_in_range("supervisor.success_threshold", self.success_threshold, 0.0, 1.0, low_closed=False)
         require_int("supervisor.max_resets", self.max_resets, minimum=0)
         if self.max_plan_latency_s is not None:

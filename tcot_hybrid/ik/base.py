@@ -189,7 +189,7 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         require_int("max_iters", self.max_iters, minimum=1)
-        for name in ("pos_tol_m", "rot_tol_rad", "damping", "step_dt_s", "velocity_scale"):
+        for name in ("pos_tol_m", "rot_tol_rad", "damping", "step_dt_s"):
             require_positive(name, getattr(self, name))
         for name in ("posture_cost", "orientation_cost", "limit_margin_rad", "table_clearance_m"):
             require_nonnegative(name, getattr(self, name))
