@@ -260,7 +260,11 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint, GLSR tracking the frozen plan's grasp and the placement after it in the planner "
+PERTURBS = (("shipped checkpoint, the layout's arm started off home by robosuite's joint noise as LIBERO's shipped init "
+             "states start (\"Data and seeds\": \"The arm's start\"); a camera fit from one hand sighting only within "
+             "0.005 rad of home (\"On the shipped init states\"); a tracked shift counted once the executor takes it",
+             "eval-perturb-v9"),
+            ("shipped checkpoint, GLSR tracking the frozen plan's grasp and the placement after it in the planner "
              "camera (\"Tracking what the plan grasps\")", "eval-perturb-v8"),
             ("shipped checkpoint, GLSR tracking the frozen plan's grasp in the planner camera (\"Tracking what the "
              "plan grasps\")", "eval-perturb-v7"),
