@@ -34,6 +34,8 @@ from tcot_hybrid.supervision import Supervisor
 from tcot_hybrid.tasks import Task, make_task
 from tcot_hybrid.jsonio import json_default as _json_default
 
+START_HOME_MAX_S = 3.0  # [s] longest the arm is given to reach home before the first plan (it takes ~0.5 s)
+
 
 
 def file_digest(path: str | Path) -> str:
@@ -153,6 +155,7 @@ class EpisodeRunner:
         self.perturbation = make_perturbation(cfg.perturb, cfg.seed)
         self.perturbation_note = self._perturbation_note()
         self.steps = 0
+        self.homing_steps = 0  # planner steps spent going home before a plan (start_home_tol_rad); count to the limit
         self.success = False
         self.stopped_by: str | None = None  # simulator | detector | time_limit | fault
         self._stop_hold = 0
@@ -200,6 +203,28 @@ class EpisodeRunner:
         for _ in range(round(self.stack.task.settle_s / self.cfg.timing.ctrl_dt)):
             ex.tick()
 
+    def go_to_home(self) -> None:
+        """An arm that starts off the robot's home posture by more than ``executor.start_home_tol_rad`` on some joint
+        goes there before the first plan, whole planner steps at a time, until it is within that tolerance (at
+        most START_HOME_MAX_S); the steps count against the time limit (``homing_steps``)."""
+        s, ex = self.stack, self.stack.executor
+        tol, home = ex.config.start_home_tol_rad, s.sim.robot.home_q
+        off = float(np.max(np.abs(s.sim.q - home)))
+        if tol is None or off <= tol:
+            return
+        ex.start_from_home(home)
+        steps = 0
+        while steps < round(START_HOME_MAX_S / self.cfg.timing.plan_dt) and s.sim.fault is None:
+            for _ in range(self.cfg.timing.ticks_per_plan):
+                ex.tick()
+            steps += 1
+            if ex.plan_finished and float(np.max(np.abs(s.sim.q - home))) <= tol:
+                break
+        self.homing_steps += steps
+        self._obs = None
+        ex.event("started_at_home", steps=steps, start_offset_rad=round(off, 4),
+                 residual_rad=round(float(np.max(np.abs(s.sim.q - home))), 5))
+
     def _reset_scene(self) -> None:
         """glsr_reset: restore the episode's initial layout and send the arm home (same seed)."""
         s = self.stack
@@ -207,6 +232,7 @@ class EpisodeRunner:
         s.executor.reset_after_scene_reset()
         self._obs = None
         self.settle()
+        self.go_to_home()
         s.planner.prepare()
 
     def _step_once(self, step: int, *, may_plan: bool) -> None:
@@ -306,10 +332,11 @@ class EpisodeRunner:
         for w in self.reach_warnings:
             s.executor.event("unreachable_target", **w)
         self.settle()
+        self.go_to_home()
         s.planner.prepare()
         step = 0
         try:
-            while step < max_steps:
+            while step + self.homing_steps < max_steps:
                 self._step_once(step, may_plan=True)
                 if self.frame_hook is not None:
                     self.frame_hook(self, step)
@@ -325,7 +352,7 @@ class EpisodeRunner:
                     self.success = True
                     self.stopped_by = "simulator"
                     break
-                if (by_detector or either) and step < max_steps and self._detector_stop(step):
+                if (by_detector or either) and step + self.homing_steps < max_steps and self._detector_stop(step):
                     self.stopped_by = "detector"
                     break
             if self.stopped_by is None:
@@ -386,7 +413,7 @@ class EpisodeRunner:
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
-            "homes": self.supervisor.homes, "grasps_tracked": self.supervisor.tracked["grasp"],
+            "homes": self.supervisor.homes, "homing_steps": self.homing_steps, "grasps_tracked": self.supervisor.tracked["grasp"],
             "releases_tracked": self.supervisor.tracked["release"],
             "camera_calibration": s.planner.calibration.summary() if hasattr(s.planner, "calibration") else None,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),

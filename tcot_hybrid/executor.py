@@ -76,6 +76,13 @@ class ExecutorConfig:
                       and stayed in the hand's grip to the time limit; docs/libero-planner.md, "The long suite:
                       its own model, and leaving a release"). Oracle plans already leave straight up. None (YAML
                       null) = off. [m]
+    start_home_tol_rad: an episode whose arm starts further than this from the robot's home posture on any joint
+                      moves there in joint space before its first plan (the steps it takes count against the
+                      time limit; event ``started_at_home``), and retries from home return there too. Every
+                      demonstration starts at home, LIBERO's shipped init states 0.01-0.05 rad off it, and the
+                      learned planner read such starts worse: development layouts 20049-20050, 51 against 62 of 80
+                      global-only (docs/libero-planner.md, "The arm's start"). None (YAML null) = off: plan from
+                      where the arm stands, and a retry from home returns to that start. [rad]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
                       the twin is solved from the same seed and taken when it converges where the other missed by
@@ -98,6 +105,7 @@ class ExecutorConfig:
     transit_min_vertical_m: float = 0.02
     switch_min_horizontal_m: float | None = 0.005
     release_retreat_m: float | None = 0.08
+    start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
 
     def __post_init__(self) -> None:
@@ -109,6 +117,8 @@ class ExecutorConfig:
             require_positive("switch_min_horizontal_m (or null: off)", self.switch_min_horizontal_m)
         if self.release_retreat_m is not None:
             require_positive("release_retreat_m (or null: off)", self.release_retreat_m)
+        if self.start_home_tol_rad is not None:
+            require_positive("start_home_tol_rad (or null: off)", self.start_home_tol_rad)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -445,25 +455,34 @@ class MotionExecutor:
         self.controller.reset(self.dyn, self._last_tau)
         self.event("scene_reset")
 
-    def go_home(self, lift_m: float) -> None:
+    def go_home(self, lift_m: float | None) -> None:
         """Drop the plan and retreat to ``home_q`` with the hand as it is: first straight up ``lift_m`` from the TCP
         (IK from the measured posture, the hand's orientation kept; skipped when it does not converge, event
-        ``going_home`` says so), then in joint space to home, so the arm does not sweep low through the scene.
-        ``plan_finished`` turns true on arrival (event ``home_reached``); the next plan starts from home."""
+        ``going_home`` says so; None: no lift), then in joint space to home, so the arm does not sweep low through
+        the scene. ``plan_finished`` turns true on arrival (event ``home_reached``); the next plan starts from home."""
         self._drop_plan()
         self._arrived_at = self._waiting_at = None
         q = self.sim.q
         if np.max(np.abs(self.smoother.reference.q - q)) > self.config.resync_tol_rad:  # e.g. after a reflex
             self.resync_to_measured("going_home")
-        T = self.sim.T_base_world
-        up = self.sim.tcp_pos() + np.array([0.0, 0.0, lift_m])
-        lift = self.ik.solve(IKTarget(pos=T[:3, :3] @ up + T[:3, 3], rot=T[:3, :3] @ self.sim.world.tcp_rot()), q)
-        self._home_targets = ([lift.q] if lift.converged else []) + [self.home_q.copy()]
+        lifted = []
+        if lift_m is not None:
+            T = self.sim.T_base_world
+            up = self.sim.tcp_pos() + np.array([0.0, 0.0, lift_m])
+            lift = self.ik.solve(IKTarget(pos=T[:3, :3] @ up + T[:3, 3], rot=T[:3, :3] @ self.sim.world.tcp_rot()), q)
+            lifted = [lift.q] if lift.converged else []
+        self._home_targets = lifted + [self.home_q.copy()]
         self._hand_turned = False  # home is the nominal hand
         self._ik_seed = self.home_q.copy()
         self.phase = "home"
-        self.event("going_home", lift_m=lift_m, lift_converged=bool(lift.converged))
+        self.event("going_home", lift_m=lift_m, lift_converged=bool(lifted) if lift_m is not None else None)
         self._set_target(self._home_targets.pop(0), -1)
+
+    def start_from_home(self, home_q: np.ndarray) -> None:
+        """Make ``home_q`` (the robot's home posture) the arm's home and go there in joint space, no lift: the start
+        of an episode whose arm stands a few hundredths of a radian off it (``start_home_tol_rad``)."""
+        self.home_q = np.asarray(home_q, dtype=float).copy()
+        self.go_home(None)
 
     def resync_to_measured(self, reason: str) -> None:
         """The arm was moved from outside (e.g. a perturbed initial posture): restart the reference, the IK seed

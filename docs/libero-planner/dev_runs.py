@@ -149,7 +149,7 @@ def checkpoint_table(rows: list[dict], runs) -> list[str]:
     return out
 
 
-def command_lines(script: str, workers: int, runs: Iterable[tuple[str, str]]) -> list[str]:
+def command_lines(script: str, workers: int | str, runs: Iterable[tuple[str, str]]) -> list[str]:
     """The docs section's closing list: each (run directory under runs/dev, command) that ``script --gather`` reads."""
     return (["", f"Commands (each with `--workers {workers} --out runs/dev/<run>`; `{script} --gather` reads them):", ""]
             + [f"- `{name}`: `{cmd}`" for name, cmd in runs])
