@@ -222,6 +222,7 @@ class EpisodeRunner:
                 break
         self.homing_steps += steps
         self._obs = None
+        s.task.arm_moved_before_start()
         ex.event("started_at_home", steps=steps, start_offset_rad=round(off, 4),
                  residual_rad=round(float(np.max(np.abs(s.sim.q - home))), 5))
 

@@ -24,10 +24,11 @@ BASE = (f"tcot eval --suite {dev_runs.S4} --planners learned --modes glsr --init
         "--episodes 2 --seed-start 20047")
 BASE50 = (f"tcot eval --suite {dev_runs.S4} --planners learned --modes global,glsr --init sampled "
           f"{dev_runs.FOUR_SUITE_MODEL} --episodes 2 --seed-start 20049")
+BASE51 = BASE50.replace("--seed-start 20049", "--seed-start 20051")
 AT_HOME = "at home (283b1fb)"
 OFF_HOME = "off home, 0.02 rad"
 HOMED = "off home, then home before the first plan"
-L47, L49 = "20047-20048", "20049-20050"
+L47, L49, L51 = "20047-20048", "20049-20050", "20051-20052"
 # (run directory under runs/dev, perturbation, mode, layouts, the arm's start, command); each (perturbation, mode,
 # layouts)'s first row is the baseline its won / lost counts against
 RUNS = (
@@ -41,6 +42,10 @@ RUNS = (
     ("noise50", "none", "glsr", L49, OFF_HOME, f"{BASE50} (at 3a8c549, before the start from home; now: --executor.start-home-tol-rad None)"),
     ("homed50", "none", "global", L49, HOMED, BASE50),
     ("homed50", "none", "glsr", L49, HOMED, BASE50),
+    ("noise51", "none", "global", L51, OFF_HOME, f"{BASE51} --executor.start-home-tol-rad None"),
+    ("homed51", "none", "global", L51, HOMED, BASE51),
+    ("noise51", "none", "glsr", L51, OFF_HOME, f"{BASE51} --executor.start-home-tol-rad None"),
+    ("homed51", "none", "glsr", L51, HOMED, BASE51),
 )
 KEEP = ("task", "suite", "mode", "seed", "perturb", "success", "premature_stop", "replans", "wall_time_s")
 

@@ -205,6 +205,11 @@ class LiberoTask(Task):
         self.world = world  # the oracle's skills read it (privileged); rebuilt per episode
         self._oracle = None
 
+    def arm_moved_before_start(self) -> None:
+        # the script composed so far (while the objects settled, the arm at its start) would stay fixed once the hand
+        # has moved (oracle.goal_skills): compose it again from the arm at home
+        self._oracle = None
+
     @property
     def travel_z(self) -> float:
         """[m, world] height the oracle planner lifts an open hand to after a release: 25 cm above the lowest

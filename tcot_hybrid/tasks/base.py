@@ -349,6 +349,10 @@ class Task(ABC):
     def reset(self, world: World, rng: np.random.Generator) -> None:
         """Place the objects for a new episode (seeded)."""
 
+    def arm_moved_before_start(self) -> None:
+        """The stack moved the arm before the first plan (``EpisodeRunner.go_to_home``): an oracle script composed
+        while the arm stood elsewhere is stale. Default: nothing is kept between calls to :meth:`skills`."""
+
     @abstractmethod
     def success(self, world: World) -> bool:
         """Task success from simulator state only."""
