@@ -34,8 +34,7 @@ from tcot_hybrid.supervision import Supervisor
 from tcot_hybrid.tasks import Task, make_task
 from tcot_hybrid.jsonio import json_default as _json_default
 
-START_HOME_MAX_S = 3.0  # [s] longest the arm is given to reach home before the first plan (it takes ~0.5 s)
-
+START_HOME_MAX_S = 3.0  # [s] longest the arm is given to reach home before the first plan (a LIBERO start: 0.3 s)
 
 
 def file_digest(path: str | Path) -> str:
@@ -414,7 +413,8 @@ class EpisodeRunner:
             "premature_stop": bool(self.stopped_by == "detector" and not success),
             "replans": self.supervisor.replans, "resets": self.supervisor.resets,
             "detector_overruled": self.supervisor.overruled, "empty_grasps": self.supervisor.empty_grasps,
-            "homes": self.supervisor.homes, "homing_steps": self.homing_steps, "grasps_tracked": self.supervisor.tracked["grasp"],
+            "homes": self.supervisor.homes, "homing_steps": self.homing_steps,
+            "grasps_tracked": self.supervisor.tracked["grasp"],
             "releases_tracked": self.supervisor.tracked["release"],
             "camera_calibration": s.planner.calibration.summary() if hasattr(s.planner, "calibration") else None,
             "max_joint_limit_violation_rad": float(ex.max_joint_limit_violation),

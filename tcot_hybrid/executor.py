@@ -80,8 +80,9 @@ class ExecutorConfig:
                       moves there in joint space before its first plan (the steps it takes count against the
                       time limit; event ``started_at_home``), and retries from home return there too. Every
                       demonstration starts at home, LIBERO's shipped init states 0.01-0.05 rad off it, and the
-                      learned planner read such starts worse: development layouts 20049-20050, 51 against 62 of 80
-                      global-only (docs/libero-planner.md, "The arm's start"). None (YAML null) = off: plan from
+                      learned planner reads such starts worse: development layouts 20049-20050, global-only 51 of
+                      80 from them, 62 from home, 61 sent home first (docs/libero-planner.md, "The arm's start").
+                      Down: more starts sent home; None (YAML null) = off: plan from
                       where the arm stands, and a retry from home returns to that start. [rad]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
