@@ -208,8 +208,12 @@ class EpisodeRunner:
         most START_HOME_MAX_S); the steps count against the time limit (``homing_steps``)."""
         s, ex = self.stack, self.stack.executor
         tol, home = ex.config.start_home_tol_rad, s.sim.robot.home_q
-        off = float(np.max(np.abs(s.sim.q - home)))
-        if tol is None or off <= tol:
+
+        def off_home() -> float:  # [rad] the largest joint's distance from home
+            return float(np.max(np.abs(s.sim.q - home)))
+
+        start_off = off_home()
+        if tol is None or start_off <= tol:
             return
         ex.start_from_home(home)
         steps = 0
@@ -217,13 +221,12 @@ class EpisodeRunner:
             for _ in range(self.cfg.timing.ticks_per_plan):
                 ex.tick()
             steps += 1
-            if ex.plan_finished and float(np.max(np.abs(s.sim.q - home))) <= tol:
+            if ex.plan_finished and off_home() <= tol:
                 break
         self.homing_steps += steps
         self._obs = None
         s.task.arm_moved_before_start()
-        ex.event("started_at_home", steps=steps, start_offset_rad=round(off, 4),
-                 residual_rad=round(float(np.max(np.abs(s.sim.q - home))), 5))
+        ex.event("started_at_home", steps=steps, start_offset_rad=round(start_off, 4), residual_rad=round(off_home(), 5))
 
     def _reset_scene(self) -> None:
         """glsr_reset: restore the episode's initial layout and send the arm home (same seed)."""

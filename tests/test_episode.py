@@ -13,8 +13,8 @@ OFFSET_RAD = np.array([0.03, -0.02, 0.02, 0.03, -0.03, 0.02, 0.03])  # a LIBERO-
 
 
 def _started_off_home(tol) -> tuple[EpisodeRunner, dict]:
-    """An oracle episode whose arm stands OFFSET_RAD off home before it starts; the measured posture and the gripper
-    command when the first plan is asked for."""
+    """An oracle episode whose arm stands OFFSET_RAD off home before it starts, and the measured posture when the first
+    plan is asked for."""
     r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, planner="oracle",
                                 executor=ExecutorConfig(start_home_tol_rad=tol)))
     sim = r.stack.sim
@@ -26,7 +26,6 @@ def _started_off_home(tol) -> tuple[EpisodeRunner, dict]:
     def first(runner, step):
         if step == 0:
             at_first_plan["q"] = runner.stack.sim.q.copy()
-            at_first_plan["t"] = runner.stack.sim.time_s
 
     r.pre_step_hook = first
     r.run()
