@@ -260,7 +260,8 @@ def eval_lines() -> list[str]:
     return lines
 
 
-PERTURBS = (("shipped checkpoint, the layout's arm started off home by robosuite's joint noise as LIBERO's shipped init "
+PERTURBS = (("shipped checkpoint, the arm sent home before the first plan (\"The arm's start\")", "eval-perturb-v10"),
+            ("shipped checkpoint, the layout's arm started off home by robosuite's joint noise as LIBERO's shipped init "
              "states start (\"Data and seeds\": \"The arm's start\"); a camera fit from one hand sighting only within "
              "0.005 rad of home (\"On the shipped init states\"); a tracked shift counted once the executor takes it",
              "eval-perturb-v9"),
