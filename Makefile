@@ -201,8 +201,8 @@ libero-planner-eval: setup
 LIBERO_PERTURBS := object_moved,target_moved,object_drop,offcenter_grasp,arm_push,camera_noise,camera_shift,init_posture
 libero-planner-perturb: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners learned --modes global,glsr --perturb $(LIBERO_PERTURBS) \
-		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb-v9 $(MULTI_MODEL)
-	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > docs/libero-planner/eval-perturb-v9/commit
+		--init sampled --episodes 1 --seed-start 90000 --workers 2 --out docs/libero-planner/eval-perturb-v10 $(MULTI_MODEL)
+	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > docs/libero-planner/eval-perturb-v10/commit
 	$(BIN)/python docs/libero-planner/summarize.py
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
