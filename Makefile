@@ -214,11 +214,11 @@ PROTOCOL := docs/libero-planner/eval-protocol
 # the four), $(6) further tcot eval flags
 define libero_protocol_row
 	mkdir -p $(or $(4),$(PROTOCOL))
-	(git rev-parse --short HEAD 2>/dev/null || echo "not a git checkout") > $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).commit
 	$(BIN)/python docs/libero-planner/protocol.py --restore-progress $(or $(4),$(PROTOCOL))
 	$(BIN)/tcot eval --suite $(or $(5),$(LIBERO_SUITES)) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
-	cp $(or $(4),$(PROTOCOL))/eval.json $(or $(4),$(PROTOCOL))/eval-$(1)-$(2).json
+	$(BIN)/python docs/libero-planner/protocol.py --keep-row $(or $(4),$(PROTOCOL)) $(1) $(2) \
+		"$$(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout')"
 endef
 # The learned rows are the paper's TCoT-Multi row (MULTI_MODEL, above)
 libero-protocol: setup

@@ -76,3 +76,17 @@ def test_a_rerun_half_done_is_in_progress_and_not_mixed_with_the_run_before(prot
 def test_restoring_without_saved_progress_restores_nothing(protocol, tmp_path):
     assert protocol.restore_progress(tmp_path) == 0
     assert not (tmp_path / "episodes.jsonl").exists()
+
+
+def test_a_row_already_complete_keeps_the_commit_and_wall_time_it_ran_with(protocol, tmp_path):
+    (tmp_path / "eval-learned-local.json").write_text(json.dumps({"episodes": 2000, "ran_now": 1104}))
+    (tmp_path / "eval-learned-local.commit").write_text("1ea9f6f\n")
+    (tmp_path / "eval.json").write_text(json.dumps({"episodes": 2000, "ran_now": 0}))
+    assert not protocol.keep_row(tmp_path, "learned", "local", "a30ff97")
+    assert (tmp_path / "eval-learned-local.commit").read_text() == "1ea9f6f\n"
+    assert json.loads((tmp_path / "eval-learned-local.json").read_text())["ran_now"] == 1104
+
+    (tmp_path / "eval.json").write_text(json.dumps({"episodes": 2000, "ran_now": 12}))
+    assert protocol.keep_row(tmp_path, "learned", "local", "a30ff97")
+    assert (tmp_path / "eval-learned-local.commit").read_text() == "a30ff97\n"
+    assert json.loads((tmp_path / "eval-learned-local.json").read_text())["ran_now"] == 12

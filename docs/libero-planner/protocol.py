@@ -184,6 +184,21 @@ def restore_progress(folder: Path) -> int:
     return len(missing)
 
 
+def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
+    """After a row's ``tcot eval``: its eval.json kept as eval-<planner>-<mode>.json and ``commit`` as its .commit,
+    but only if the run ran an episode; a row that was already complete (every episode read back from the folder)
+    keeps the wall time and the commit of the run that made it. Returns whether the row's files were written."""
+    result = json.loads((folder / "eval.json").read_text())
+    if result["ran_now"] == 0:
+        print(f"{folder}: {planner} {mode} ran no episode (all {result['episodes']} in the folder already); "
+              f"eval-{planner}-{mode}.json/.commit kept as they were")
+        return False
+    (folder / f"eval-{planner}-{mode}.json").write_text((folder / "eval.json").read_text())
+    (folder / f"eval-{planner}-{mode}.commit").write_text(commit + "\n")
+    print(f"{folder}: {planner} {mode} ran {result['ran_now']} of {result['episodes']} episodes at {commit}")
+    return True
+
+
 def _suite_model_folders() -> list[Path]:
     return sorted(p for p in SUITE_EVAL.glob("*") if p.is_dir()) if SUITE_EVAL.is_dir() else []
 
@@ -378,7 +393,14 @@ def main() -> None:
                      help="write FOLDER/episodes.jsonl, slimmed, to FOLDER/progress.jsonl.gz (default folder: %(const)s)")
     act.add_argument("--restore-progress", metavar="FOLDER", nargs="?", const=str(EVAL), type=Path,
                      help="append FOLDER/progress.jsonl.gz's episodes missing from FOLDER/episodes.jsonl")
+    act.add_argument("--keep-row", nargs=4, metavar=("FOLDER", "PLANNER", "MODE", "COMMIT"),
+                     help="after a row's tcot eval: keep FOLDER/eval.json as eval-PLANNER-MODE.json and COMMIT as its "
+                          ".commit, unless the run ran no episode (the row's files then stay as they were)")
     args = ap.parse_args()
+    if args.keep_row:
+        folder, planner, mode, commit = args.keep_row
+        keep_row(Path(folder), planner, mode, commit)
+        return
     if args.save_progress:
         save_progress(args.save_progress)
         return
