@@ -207,7 +207,8 @@ libero-planner-perturb: setup
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
 # tcot eval per row into one folder (resumable); each run's eval.json is kept as eval-<planner>-<mode>.json (its wall
-# time) and the commit it ran at as eval-<planner>-<mode>.commit; a row cut off with the session resumes on another
+# time) and the commit it ran at as eval-<planner>-<mode>.commit (a row already complete, which runs no episode, keeps
+# the files of the run that made it; a row resumed records the commit of its last part); a row cut off with the session resumes on another
 # machine from progress.jsonl.gz (`protocol.py --save-progress`, committed) when its commit is the same. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
 # $(1) planner, $(2) mode, $(3) episodes per task; optional $(4) folder (default $(PROTOCOL)), $(5) suites (default
