@@ -30,6 +30,7 @@ from pathlib import Path
 
 from summarize import SUITES, rate
 
+from tcot_hybrid.jsonio import atomic_write_text
 from tcot_hybrid.markdown import update_readme_section
 from tcot_hybrid.metrics import wilson_interval
 
@@ -188,13 +189,14 @@ def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
     """After a row's ``tcot eval``: its eval.json kept as eval-<planner>-<mode>.json and ``commit`` as its .commit,
     but only if the run ran an episode; a row that was already complete (every episode read back from the folder)
     keeps the wall time and the commit of the run that made it. Returns whether the row's files were written."""
-    result = json.loads((folder / "eval.json").read_text())
+    text = (folder / "eval.json").read_text()
+    result = json.loads(text)
     if result["ran_now"] == 0:
         print(f"{folder}: {planner} {mode} ran no episode (all {result['episodes']} in the folder already); "
               f"eval-{planner}-{mode}.json/.commit kept as they were")
         return False
-    (folder / f"eval-{planner}-{mode}.json").write_text((folder / "eval.json").read_text())
-    (folder / f"eval-{planner}-{mode}.commit").write_text(commit + "\n")
+    atomic_write_text(folder / f"eval-{planner}-{mode}.json", text)
+    atomic_write_text(folder / f"eval-{planner}-{mode}.commit", commit + "\n")
     print(f"{folder}: {planner} {mode} ran {result['ran_now']} of {result['episodes']} episodes at {commit}")
     return True
 
