@@ -89,7 +89,7 @@ def _records(folder: Path = EVAL) -> list[dict]:
     _drop_saved_progress(folder, {_run_row(e) for e in full})
     records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
                                                      r["seed"]))
-    (folder / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    atomic_write_text(folder / "records.jsonl", "".join(json.dumps(r) + "\n" for r in records))
     return records
 
 
@@ -411,7 +411,7 @@ def main() -> None:
         return
     by = _rows()
     suite_eps = _suite_model_records()  # reads (and rewrites) each suite folder's records once
-    (EVAL / "per_task.md").write_text("\n".join(per_task_lines(by, suite_eps)) + "\n")
+    atomic_write_text(EVAL / "per_task.md", "\n".join(per_task_lines(by, suite_eps)) + "\n")
     text = "\n".join(table1_lines(by, suite_eps) + table4_lines(by)) + "\n"
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-protocol", text)
