@@ -307,6 +307,12 @@ def test_libero_configs_share_model_windows_and_height_reference():
     for c in (ft, fifty):
         assert (c.model, c.windows, c.height_ref, c.data) == (first.model, first.windows, first.height_ref, first.data)
     assert fifty.epoch_samples and fifty.max_epochs * fifty.epoch_samples > 3 * ft.max_epochs * 8314
+    # the 100-per-task run: the same network from nothing, at least as many samples as the shipped two runs together
+    hundred, v2 = (load_train_config(root / f"train_libero{x}.yaml") for x in ("100", "_v2"))
+    assert hundred.init is None and hundred.out not in (fifty.out, v2.out) and hundred.data != fifty.data
+    assert (hundred.model, hundred.windows, hundred.height_ref) == (fifty.model, fifty.windows, fifty.height_ref)
+    assert (hundred.max_epochs * hundred.epoch_samples
+            >= fifty.max_epochs * fifty.epoch_samples + v2.max_epochs * v2.epoch_samples)
 
 
 @pytest.mark.parametrize("suite, stem, base", [("libero_10", "10", "_v3"), ("libero_goal", "_goal97", "_v3"),
