@@ -4,8 +4,9 @@
     MUJOCO_GL=egl .venv/bin/python docs/libero-planner/carry_release.py --measure --seed 20000  # about 35 min, 1 core
     .venv/bin/python docs/libero-planner/carry_release.py     # runs/dev/carry_release/*.jsonl -> carry_release.json, docs
 
-`--measure` runs every task of the four suites whose goal puts an object on or in something once on a sampled development layout, learned planner (the task's
-shipped model), global-only, so the executed plan is the t = 0 global plan. At every planner step while the hand is
+`--measure` runs every task of the four suites whose goal puts an object on or in something once on a sampled
+development layout, learned planner (the task's shipped model), global-only, so the executed plan is the t = 0 global
+plan. At every planner step while the hand is
 closed on a goal object (the one nearest the hand, within 12 cm) it asks the local prompt for a plan from that image
 and records the local plan's first release (the last closed point before the first open one, lifted with the plan's
 own camera), the global plan's next release, the hand, the object's offset from the hand and the target's centre (the
@@ -39,6 +40,17 @@ LOOKS = (1, 3)
 WEIGHTS = (0.0, 0.5, 1.0)  # 0: the global release as planned, 1: the local one
 
 
+def releases(grip) -> list[int]:
+    """Index of each point where the hand is last closed before it opens (the release point)."""
+    return [i - 1 for i in range(1, len(grip)) if grip[i - 1] and not grip[i]]
+
+
+def target_xy(data, target) -> np.ndarray:
+    """The target's centre in the table plane: a body's position or a region site's."""
+    kind, i = target
+    return (data.xpos[i] if kind == "body" else data.site_xpos[i])[:2].copy()
+
+
 def measure(seed: int) -> None:
     import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
@@ -67,17 +79,15 @@ def measure(seed: int) -> None:
                 sites = [i for i in range(m.nsite) if m.site(i).name.endswith(g[2])]
                 if sites:
                     preds.append((g[1], g[2], ob, ("site", sites[0])))
+        if not preds:  # nothing is put anywhere (a drawer opened, a knob turned): no carry to read
+            continue
         rows: list[dict] = []
         plans: list = []  # (plan, [(executor point index, release point)])
 
-        def target_xy(d, t):
-            return (d.xpos[t[1]] if t[0] == "body" else d.site_xpos[t[1]])[:2].copy()
-
-        def look(r, step, preds=preds, rows=rows, plans=plans, target_xy=target_xy):
+        def look(r, step):  # runs within this task's episode only: preds, rows and plans are this task's
             sim, ex = r.stack.sim, r.stack.executor
             if ex.plan is not None and (not plans or plans[-1][0] is not ex.plan):
-                rel = [i - 1 for i in range(1, len(ex.grip)) if ex.grip[i - 1] and not ex.grip[i]]
-                plans.append((ex.plan, [(i, ex.points[i].tolist()) for i in rel]))
+                plans.append((ex.plan, [(i, ex.points[i].tolist()) for i in releases(ex.grip)]))
             if not sim.gripper_closed_cmd():
                 return
             hand, d = sim.tcp_pos(), sim.data
@@ -86,8 +96,7 @@ def measure(seed: int) -> None:
                 return
             plan = r.stack.planner.plan(r.observe(step), mode="local")
             pts = lift_waypoints(plan.uv_px, plan.depth_m, plan.lift_camera(ex.camera))
-            g = np.asarray(plan.gripper_closed, bool)
-            rel = [i - 1 for i in range(1, len(g)) if g[i - 1] and not g[i]]
+            rel = releases(np.asarray(plan.gripper_closed, bool))
             ahead = [p for i, p in plans[-1][1] if i >= ex.index] if plans else []
             row = {"step": step, "obj": obj, "hand": np.round(hand, 4).tolist(),
                    "obj_off": np.round(d.xpos[ob][:2] - hand[:2], 4).tolist(),
@@ -98,8 +107,6 @@ def measure(seed: int) -> None:
                 row["global_release"] = np.round(ahead[0], 4).tolist()
             rows.append(row)
 
-        if not preds:  # nothing is put anywhere (a drawer opened, a knob turned): no carry to read
-            continue
         runner.frame_hook = look
         with one_torch_thread():  # as `tcot run` and the evaluation's workers
             runner.run()
@@ -147,7 +154,8 @@ def summarize() -> dict:
             rows.append({"far_m": far, "looks": k, "carries": len(kept), "left_out": len(cs) - len(kept),
                          "median_cm": np.round(np.median(e, axis=0), 2).tolist(),
                          "over_2cm": (e > 2).sum(axis=0).tolist(), "over_3cm": (e > 3).sum(axis=0).tolist(),
-                         "local_nearer": int((e[:, 2] < e[:, 0]).sum()), "global_nearer": int((e[:, 2] > e[:, 0]).sum())})
+                         "local_nearer": int((e[:, 2] < e[:, 0]).sum()),
+                         "global_nearer": int((e[:, 2] > e[:, 0]).sum())})
     return {"seeds": sorted({ep["seed"] for ep in episodes}), "episodes": len(episodes),
             "successes": sum(ep["success"] for ep in episodes), "weights": list(WEIGHTS), "rows": rows}
 
@@ -155,9 +163,10 @@ def summarize() -> dict:
 def markdown(res: dict) -> str:
     seeds = ", ".join(str(s) for s in res["seeds"])
     lines = [f"Sampled development layouts {seeds}, every task of the four suites with an On or In goal, the task's "
-             f"shipped model, global-only ({res['episodes']} episodes, {res['successes']} successful); `docs/libero-planner/carry_release.py` → "
-             "`carry_release.json`. Landing error: the carried object's would-be landing (release xy plus the object's "
-             "offset from the hand) to the target's centre, median [cm] and carries over 2 / 3 cm:", "",
+             f"shipped model, global-only ({res['episodes']} episodes, {res['successes']} successful); "
+             "`docs/libero-planner/carry_release.py` → `carry_release.json`. Landing error: the carried object's "
+             "would-be landing (release xy plus the object's offset from the hand) to the target's centre, median [cm] "
+             "and carries over 2 / 3 cm:", "",
              "| looks made at least | looks | carries | global release | midway | local release | local nearer / "
              "further |", "|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
