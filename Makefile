@@ -207,19 +207,20 @@ libero-planner-perturb: setup
 
 # The paper's protocol (Table 1, Table 4): the shipped checkpoints on the 50 shipped init states of every task, one
 # tcot eval per row into one folder (resumable); each run's eval.json is kept as eval-<planner>-<mode>.json (its wall
-# time) and the commit it ran at as eval-<planner>-<mode>.commit (a row already complete, which runs no episode, keeps
-# the files of the run that made it; a row resumed records the commit of its last part); a row cut off with the session resumes on another
+# time) and the commits its parts started at as eval-<planner>-<mode>.commit (a row already complete, which runs no
+# episode, keeps the files of the runs that made it); a row cut off with the session resumes on another
 # machine from progress.jsonl.gz (`protocol.py --save-progress`, committed) when its commit is the same. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
 # $(1) planner, $(2) mode, $(3) episodes per task; optional $(4) folder (default $(PROTOCOL)), $(5) suites (default
 # the four), $(6) further tcot eval flags
+HEAD_COMMIT = $$(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout')
 define libero_protocol_row
 	mkdir -p $(or $(4),$(PROTOCOL))
 	$(BIN)/python docs/libero-planner/protocol.py --restore-progress $(or $(4),$(PROTOCOL))
+	$(BIN)/python docs/libero-planner/protocol.py --start-row $(or $(4),$(PROTOCOL)) $(1) $(2) "$(HEAD_COMMIT)"
 	$(BIN)/tcot eval --suite $(or $(5),$(LIBERO_SUITES)) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
-	$(BIN)/python docs/libero-planner/protocol.py --keep-row $(or $(4),$(PROTOCOL)) $(1) $(2) \
-		"$$(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout')"
+	$(BIN)/python docs/libero-planner/protocol.py --keep-row $(or $(4),$(PROTOCOL)) $(1) $(2) "$(HEAD_COMMIT)"
 endef
 # The learned rows are the paper's TCoT-Multi row (MULTI_MODEL, above)
 libero-protocol: setup

@@ -90,3 +90,18 @@ def test_a_row_already_complete_keeps_the_commit_and_wall_time_it_ran_with(proto
     assert protocol.keep_row(tmp_path, "learned", "local", "a30ff97")
     assert (tmp_path / "eval-learned-local.commit").read_text() == "a30ff97\n"
     assert json.loads((tmp_path / "eval-learned-local.json").read_text())["ran_now"] == 12
+
+
+def test_a_row_resumed_at_another_commit_names_every_commit_its_parts_started_at(protocol, tmp_path):
+    protocol.start_row(tmp_path, "learned", "glsr", "1ea9f6f")  # cut off with the session: never kept
+    protocol.start_row(tmp_path, "learned", "glsr", "a30ff97")
+    (tmp_path / "eval.json").write_text(json.dumps({"episodes": 2000, "ran_now": 1104}))
+    assert protocol.keep_row(tmp_path, "learned", "glsr", "a30ff97")
+    assert (tmp_path / "eval-learned-glsr.commit").read_text() == "1ea9f6f, then a30ff97\n"
+    assert not (tmp_path / "eval-learned-glsr.started").exists()
+
+    # a later run in one part names its own commit alone
+    protocol.start_row(tmp_path, "learned", "glsr", "b00c0de")
+    (tmp_path / "eval.json").write_text(json.dumps({"episodes": 2000, "ran_now": 2000}))
+    assert protocol.keep_row(tmp_path, "learned", "glsr", "b00c0de")
+    assert (tmp_path / "eval-learned-glsr.commit").read_text() == "b00c0de\n"

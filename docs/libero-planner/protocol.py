@@ -2,7 +2,7 @@
 checkpoints on the 50 shipped init states of every task of the four suites, beside the paper's published figures,
 into the <!-- libero-protocol:start/end --> sections of docs/libero-planner.md and README.md, from what
 ``make libero-protocol`` wrote: one ``tcot eval`` per row into docs/libero-planner/eval-protocol/ (resumable; each
-run's eval.json is kept as eval-<planner>-<mode>.json for its wall time, the commit it ran at as
+run's eval.json is kept as eval-<planner>-<mode>.json for its wall time, the commits its parts started at as
 eval-<planner>-<mode>.commit; the episodes, trimmed, as records.jsonl), then
 
     .venv/bin/python docs/libero-planner/protocol.py
@@ -185,19 +185,35 @@ def restore_progress(folder: Path) -> int:
     return len(missing)
 
 
+def start_row(folder: Path, planner: str, mode: str, commit: str) -> None:
+    """Before a row's ``tcot eval``: ``commit`` appended to eval-<planner>-<mode>.started, so that a row cut off with
+    the session and resumed at another commit names every commit its episodes ran at (the file is committed with
+    the saved progress)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / f"eval-{planner}-{mode}.started", "a") as f:
+        f.write(commit + "\n")
+
+
 def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
-    """After a row's ``tcot eval``: its eval.json kept as eval-<planner>-<mode>.json and ``commit`` as its .commit,
+    """After a row's ``tcot eval``: its eval.json kept as eval-<planner>-<mode>.json and, as its .commit, the commits
+    its parts started at (eval-<planner>-<mode>.started, :func:`start_row`; ``commit`` when there is none), in order,
     but only if the run ran an episode; a row that was already complete (every episode read back from the folder)
-    keeps the wall time and the commit of the run that made it. Returns whether the row's files were written."""
+    keeps the wall time and the commits of the runs that made it. The .started file is emptied either way. Returns
+    whether the row's files were written."""
+    started = folder / f"eval-{planner}-{mode}.started"
+    parts = list(dict.fromkeys(started.read_text().split())) if started.is_file() else []
+    started.unlink(missing_ok=True)
     text = (folder / "eval.json").read_text()
     result = json.loads(text)
     if result["ran_now"] == 0:
         print(f"{folder}: {planner} {mode} ran no episode (all {result['episodes']} in the folder already); "
               f"eval-{planner}-{mode}.json/.commit kept as they were")
         return False
+    commits = parts if result["ran_now"] < result["episodes"] and parts else [commit]
     atomic_write_text(folder / f"eval-{planner}-{mode}.json", text)
-    atomic_write_text(folder / f"eval-{planner}-{mode}.commit", commit + "\n")
-    print(f"{folder}: {planner} {mode} ran {result['ran_now']} of {result['episodes']} episodes at {commit}")
+    atomic_write_text(folder / f"eval-{planner}-{mode}.commit", ", then ".join(commits) + "\n")
+    print(f"{folder}: {planner} {mode} ran {result['ran_now']} of {result['episodes']} episodes at "
+          f"{', then '.join(commits)}")
     return True
 
 
@@ -260,7 +276,7 @@ def _average(got: dict[str, list[int]]) -> str:
 
 def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     """How a row's last run went (eval-<planner>-<mode>.json, written when it finished) and the commit it ran at
-    (eval-<planner>-<mode>.commit, written when it started)."""
+    (eval-<planner>-<mode>.commit: the commits its parts started at, :func:`keep_row`)."""
     parts = []
     p = folder / f"eval-{planner}-{mode}.json"
     if p.is_file():
@@ -395,10 +411,17 @@ def main() -> None:
                      help="write FOLDER/episodes.jsonl, slimmed, to FOLDER/progress.jsonl.gz (default folder: %(const)s)")
     act.add_argument("--restore-progress", metavar="FOLDER", nargs="?", const=str(EVAL), type=Path,
                      help="append FOLDER/progress.jsonl.gz's episodes missing from FOLDER/episodes.jsonl")
+    act.add_argument("--start-row", nargs=4, metavar=("FOLDER", "PLANNER", "MODE", "COMMIT"),
+                     help="before a row's tcot eval: append COMMIT to FOLDER/eval-PLANNER-MODE.started")
     act.add_argument("--keep-row", nargs=4, metavar=("FOLDER", "PLANNER", "MODE", "COMMIT"),
-                     help="after a row's tcot eval: keep FOLDER/eval.json as eval-PLANNER-MODE.json and COMMIT as its "
-                          ".commit, unless the run ran no episode (the row's files then stay as they were)")
+                     help="after a row's tcot eval: keep FOLDER/eval.json as eval-PLANNER-MODE.json and, as its "
+                          ".commit, the commits its parts started at (COMMIT for a run in one part), unless the run "
+                          "ran no episode (the row's files then stay as they were)")
     args = ap.parse_args()
+    if args.start_row:
+        folder, planner, mode, commit = args.start_row
+        start_row(Path(folder), planner, mode, commit)
+        return
     if args.keep_row:
         folder, planner, mode, commit = args.keep_row
         keep_row(Path(folder), planner, mode, commit)
