@@ -115,15 +115,23 @@ libero-oracle-eval: setup
 # sampled layouts, training seeds 0.. (docs/seeds.md; never the shipped init states, the test set), a planner image
 # every 3rd planner step (LIBERO frames cost 28-80 ms); the collection resumes (episodes already in the file are
 # kept). LIBERO_PLANNER_EPISODES demonstrations per task (the issue asks 50):
-#  * 50 (default): one run, train_libero50.yaml, longer than a session: `tcot train --resume` continues it from its
-#    last epoch (runs/libero/planner50.resume.pt), so `make libero-planner` again after a cut goes on where it stopped;
+#  * 100 (default; the shipped four-suite checkpoint since stop 54): today's oracle, one run from nothing,
+#    train_libero100.yaml (48 epochs, about 2.5 h on 2 cores), longer than a session: `tcot train --resume` continues
+#    it from its last epoch (runs/libero/planner100.resume.pt), so `make libero-planner` again after a cut goes on
+#    where it stopped. It builds the four-suite default only: libero_10's own model and the direct baseline come
+#    from the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
+#    and then `make libero-planner`;
+#  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
+#    model from it and the direct baseline, resumable the same way;
 #  * 10: the shipped 400-demo checkpoint's recipe, two runs (train_libero.yaml, then train_libero_finetune.yaml from
 #    its weights: the first alone was underfit).
 # The last run's checkpoint is copied to tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks
 # on LIBERO tasks of suites without their own model (libero_panda_<suite>.*: libero_10's, built after it); held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
 # on the same file (train_libero_direct.yaml, ~15 min) and copied to libero_panda_direct_default.*, which
 # `--planner direct` picks on LIBERO tasks.
-LIBERO_PLANNER_EPISODES ?= 50
+LIBERO_PLANNER_EPISODES ?= 100
+LIBERO_PLANNER_DATA := $(if $(filter 100,$(LIBERO_PLANNER_EPISODES)),data/demos_libero_100.hdf5,data/demos_libero_panda.hdf5)
+LIBERO_PLANNER_COLLECT_LOG := $(if $(filter 100,$(LIBERO_PLANNER_EPISODES)),collect_100.log,collect.log)
 # One resumable training run of the recipe: $(1) config under examples/configs, $(2) its output's stem under
 # runs/libero, $(3) the log's name (runs/libero/ and, filtered, docs/libero-planner/), $(4) more `tcot train` arguments.
 # A run cut by max_minutes fails here naming the config; `make libero-planner` again resumes it.
@@ -140,9 +148,14 @@ endef
 libero-planner: setup
 	mkdir -p docs/libero-planner runs/libero
 	$(BIN)/tcot collect --suite $(LIBERO_SUITES) --episodes-per-task $(LIBERO_PLANNER_EPISODES) --seed-start 0 \
-		--image-every 3 --workers 2 --quiet --out data/demos_libero_panda.hdf5 > docs/libero-planner/collect.log 2>&1 \
-		|| (tail -5 docs/libero-planner/collect.log; exit 1)
-ifeq ($(LIBERO_PLANNER_EPISODES),10)
+		--image-every 3 --workers 2 --quiet --out $(LIBERO_PLANNER_DATA) \
+		> docs/libero-planner/$(LIBERO_PLANNER_COLLECT_LOG) 2>&1 || (tail -5 docs/libero-planner/$(LIBERO_PLANNER_COLLECT_LOG); exit 1)
+ifeq ($(LIBERO_PLANNER_EPISODES),100)
+	$(call libero_train_resumable,train_libero100,planner100,train100,)
+	cp runs/libero/planner100.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
+	cp runs/libero/planner100.json tcot_hybrid/checkpoints/libero_panda_default.json
+	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --data $(LIBERO_PLANNER_DATA) --out docs/libero-planner/heldout-100.json
+else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \
 		|| (tail -5 runs/libero/train.log; exit 1)
 	grep -v "it/s\|s/it\|step/s" runs/libero/train.log > docs/libero-planner/train.log
@@ -173,6 +186,7 @@ else
 	cp runs/libero/planner_libero10_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
 	cp runs/libero/planner_libero10_corner.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
 endif
+ifneq ($(LIBERO_PLANNER_EPISODES),100)
 	$(BIN)/tcot train --config examples/configs/train_libero_direct.yaml --overwrite > runs/libero/direct_train.log 2>&1 \
 		|| (tail -5 runs/libero/direct_train.log; exit 1)
 	tr "\r" "\n" < runs/libero/direct_train.log | grep -v "it/s\|s/it\|step/s\|^ *$$" > docs/libero-planner/direct_train.log
@@ -181,6 +195,7 @@ endif
 	cp runs/libero/direct.json tcot_hybrid/checkpoints/libero_panda_direct_default.json
 	$(BIN)/python docs/libero-planner/direct.py
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --out docs/libero-planner/heldout.json
+endif
 	$(BIN)/python docs/libero-planner/summarize.py
 
 # The learned LIBERO planner in the paper's protocol (shipped init states), on the subset docs/libero-planner.md

@@ -274,6 +274,18 @@ def _average(got: dict[str, list[int]]) -> str:
     return f"**{k / n:.3f}** [{lo:.2f}, {hi:.2f}] n={n}"
 
 
+def _checkpoint_note(eps: list[dict], shipped_stem: str) -> str:
+    """The checkpoint a row's episodes loaded (one per row: :func:`_rows`), and whether it is the one shipped now in
+    tcot_hybrid/checkpoints/``shipped_stem``.safetensors (a row of a replaced checkpoint stays in the tables until
+    the new one's row is complete)."""
+    from tcot_hybrid.episode import file_digest
+
+    ran = eps[0]["checkpoint_hash"]
+    shipped = ROOT / "tcot_hybrid" / "checkpoints" / f"{shipped_stem}.safetensors"
+    now = file_digest(shipped) if shipped.is_file() else None
+    return f"checkpoint `{ran}`" + ("" if ran == now else f", **not the one shipped now** (`{now}`)")
+
+
 def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     """How a row's last run went (eval-<planner>-<mode>.json, written when it finished) and the commit it ran at
     (eval-<planner>-<mode>.commit: the commits its parts started at, :func:`keep_row`)."""
@@ -344,7 +356,9 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
         # what the row costs without the gaps between its parts (runs cut off and resumed): the episodes' own wall times
         work_min = sum(e["wall_time_s"] for e in eps) / 60
         by_suite = ", ".join(f"{s} {sum(e['wall_time_s'] for e in eps if e['suite'] == s) / 60:.0f}" for s in SUITES)
-        lines.append(f"- {label}: {len(eps)} episodes" + (f"; run: {how}" if how else "")
+        shipped_stem = "libero_panda_direct_default" if key[0] == "direct" else "libero_panda_default"
+        lines.append(f"- {label}: {len(eps)} episodes, {_checkpoint_note(eps, shipped_stem)}"
+                     + (f"; run: {how}" if how else "")
                      + f"; the episodes' own wall times sum to {work_min:.0f} worker-min ({by_suite}), "
                        f"{work_min / 2:.0f} min on 2 workers before scene builds and worker starts"
                      + f"; {sum(faults.values())} faulted" + (f" ({why})" if why else "")
@@ -354,6 +368,8 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
     for folder in _suite_model_folders():
         eps = [e for e in suite_eps if e["suite"] == folder.name]
         how = ", ".join(x for x in (f"{len(eps)} episodes", _provenance("learned", "glsr", folder)) if x)
+        if eps:
+            how += ", " + _checkpoint_note(eps, f"libero_panda_{folder.name}")
         lines.append(f"- {SUITE_ROW.split(' (')[0]}, {folder.name} (`{folder.relative_to(ROOT)}/`): {how}; "
                      f"{sum(bool(e['fault']) for e in eps)} faulted, none counted as a success.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
