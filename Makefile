@@ -127,7 +127,7 @@ libero-oracle-eval: setup
 #    its weights: the first alone was underfit).
 # The last run's checkpoint is copied to tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks
 # on LIBERO tasks of suites without their own model (libero_panda_<suite>.*: libero_10's, built after it); held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
-# on the same file (train_libero_direct.yaml, ~15 min) and copied to libero_panda_direct_default.*, which
+# on the 50-per-task file (train_libero_direct.yaml, ~15 min; LIBERO_PLANNER_EPISODES=50 only) and copied to libero_panda_direct_default.*, which
 # `--planner direct` picks on LIBERO tasks.
 LIBERO_PLANNER_EPISODES ?= 100
 LIBERO_PLANNER_DATA := $(if $(filter 100,$(LIBERO_PLANNER_EPISODES)),data/demos_libero_100.hdf5,data/demos_libero_panda.hdf5)

@@ -198,10 +198,11 @@ def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
     """After a row's ``tcot eval``: its eval.json kept as eval-<planner>-<mode>.json and, as its .commit, the commits
     its parts started at (eval-<planner>-<mode>.started, :func:`start_row`; ``commit`` when there is none), in order,
     but only if the run ran an episode; a row that was already complete (every episode read back from the folder)
-    keeps the wall time and the commits of the runs that made it. The .started file is emptied either way. Returns
+    keeps the wall time and the commits of the runs that made it. The .started file is removed either way. Returns
     whether the row's files were written."""
     started = folder / f"eval-{planner}-{mode}.started"
-    parts = list(dict.fromkeys(started.read_text().split())) if started.is_file() else []
+    lines = [x.strip() for x in started.read_text().splitlines() if x.strip()] if started.is_file() else []
+    parts = [c for i, c in enumerate(lines) if i == 0 or c != lines[i - 1]]  # a part started twice at one commit
     started.unlink(missing_ok=True)
     text = (folder / "eval.json").read_text()
     result = json.loads(text)
@@ -209,7 +210,8 @@ def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
         print(f"{folder}: {planner} {mode} ran no episode (all {result['episodes']} in the folder already); "
               f"eval-{planner}-{mode}.json/.commit kept as they were")
         return False
-    commits = parts if result["ran_now"] < result["episodes"] and parts else [commit]
+    # a run in one part: the commit it started at (commits can land while a row runs)
+    commits = (parts if result["ran_now"] < result["episodes"] else parts[-1:]) or [commit]
     atomic_write_text(folder / f"eval-{planner}-{mode}.json", text)
     atomic_write_text(folder / f"eval-{planner}-{mode}.commit", ", then ".join(commits) + "\n")
     print(f"{folder}: {planner} {mode} ran {result['ran_now']} of {result['episodes']} episodes at "

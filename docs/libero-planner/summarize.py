@@ -37,12 +37,14 @@ def rate(k: int, n: int) -> str:
 
 def build_lines() -> list[str]:
     lines = []
-    log = HERE / "collect.log"
+    meta_p = CKPT.with_suffix(".json")
+    hundred = meta_p.is_file() and str(json.loads(meta_p.read_text())["train_config"].get("out", "")).endswith(
+        "planner100.safetensors")  # the 100-per-task recipe: its own collection and log
+    log = HERE / ("collect_100.log" if hundred else "collect.log")
     m = None
     if log.is_file():
         m = re.search(r"(\d+) demos written \((\d+) already present, (\d+) unsuccessful kept, (\d+) crashed\) in "
                       r"([\d.]+) s .*?([\d.]+) MiB; masks: (\d+) train / (\d+) valid", log.read_text())
-    meta_p = CKPT.with_suffix(".json")
     if not meta_p.is_file():
         return ["- the LIBERO planner has not been built yet (`make libero-planner`)"]
     meta = json.loads(meta_p.read_text())
@@ -50,13 +52,13 @@ def build_lines() -> list[str]:
     size_mb = CKPT.with_suffix(".safetensors").stat().st_size / 1e6
     if m:
         written, present, failed, crashed, wall, mib, ntr, nva = m.groups()
-        lines.append(f"- **Collection** (`docs/libero-planner/collect.log`): {written} oracle episodes on sampled "
+        lines.append(f"- **Collection** (`docs/libero-planner/{log.name}`): {written} oracle episodes on sampled "
                      f"layouts (seeds from 0, the four suites' 40 tasks; {present} already in the file), "
                      f"{float(wall) / 60:.1f} min wall with 2 workers on 2 shared cores, a planner image every 3rd "
                      f"step; {failed} unsuccessful (kept, never imitated), {crashed} crashed; {mib} MiB; "
                      f"{ntr} training / {nva} validation demos (split by seed).")
     log2 = HERE / "collect_v2.log"
-    if log2.is_file():
+    if log2.is_file() and not hundred:
         parts = re.findall(r"(\d+) demos written \((\d+) already present, (\d+) unsuccessful kept, (\d+) crashed\) in "
                            r"([\d.]+) s", log2.read_text())
         lines.append(f"- **Recollection through the release** (`docs/libero-planner/collect_v2.log`, "
@@ -66,7 +68,9 @@ def build_lines() -> list[str]:
                      f"{sum(int(p[2]) for p in parts)} unsuccessful, {sum(int(p[3]) for p in parts)} crashed).")
     runs = [("train", "examples/configs/train_libero.yaml")]
     out = str(tc.get("out", ""))
-    if out.endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
+    if hundred:  # the 100-per-task recipe: one resumable run from nothing
+        runs = [("train100", "examples/configs/train_libero100.yaml")]
+    elif out.endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
         runs = [("train50", "examples/configs/train_libero50.yaml")]
     elif "planner_v2" in out:  # ... fine-tuned on the demos recollected through the release
         runs = [("train50", "examples/configs/train_libero50.yaml"), ("train_v2", "examples/configs/train_libero_v2.yaml")]
