@@ -38,17 +38,17 @@ def rate(k: int, n: int) -> str:
 def build_lines() -> list[str]:
     lines = []
     meta_p = CKPT.with_suffix(".json")
-    hundred = meta_p.is_file() and str(json.loads(meta_p.read_text())["train_config"].get("out", "")).endswith(
-        "planner100.safetensors")  # the 100-per-task recipe: its own collection and log
+    if not meta_p.is_file():
+        return ["- the LIBERO planner has not been built yet (`make libero-planner`)"]
+    meta = json.loads(meta_p.read_text())
+    tc = meta["train_config"]
+    out = str(tc.get("out", ""))
+    hundred = out.endswith("planner100.safetensors")  # the 100-per-task recipe: its own collection and log
     log = HERE / ("collect_100.log" if hundred else "collect.log")
     m = None
     if log.is_file():
         m = re.search(r"(\d+) demos written \((\d+) already present, (\d+) unsuccessful kept, (\d+) crashed\) in "
                       r"([\d.]+) s .*?([\d.]+) MiB; masks: (\d+) train / (\d+) valid", log.read_text())
-    if not meta_p.is_file():
-        return ["- the LIBERO planner has not been built yet (`make libero-planner`)"]
-    meta = json.loads(meta_p.read_text())
-    tc = meta["train_config"]
     size_mb = CKPT.with_suffix(".safetensors").stat().st_size / 1e6
     if m:
         written, present, failed, crashed, wall, mib, ntr, nva = m.groups()
@@ -67,7 +67,6 @@ def build_lines() -> list[str]:
                      f"{sum(float(p[4]) for p in parts) / 60:.1f} min wall with 2 workers; "
                      f"{sum(int(p[2]) for p in parts)} unsuccessful, {sum(int(p[3]) for p in parts)} crashed).")
     runs = [("train", "examples/configs/train_libero.yaml")]
-    out = str(tc.get("out", ""))
     if hundred:  # the 100-per-task recipe: one resumable run from nothing
         runs = [("train100", "examples/configs/train_libero100.yaml")]
     elif out.endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
