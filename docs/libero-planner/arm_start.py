@@ -79,10 +79,7 @@ def lines() -> list[str]:
         eps = by.get((name, mode))
         if not eps:
             continue
-        key = (perturb, mode, layouts)
-        first = key not in base
-        base.setdefault(key, {(e["task"], e["seed"]): e["success"] for e in eps})
-        wl = "-" if first else dev_runs.won_lost(base[key], eps)
+        wl = dev_runs.against_first(base, (perturb, mode, layouts), eps)
         err = statistics.median(e["nominal_error_px"] for e in eps)
         out.append(f"| {layouts} | {mode} | {perturb} | {start} | " + " | ".join(dev_runs.per_suite(eps))
                    + f" | **{dev_runs.frac(eps)}** | {wl} | {sum(e['refined'] for e in eps)} | {err:.1f} |")

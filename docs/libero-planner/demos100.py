@@ -45,9 +45,7 @@ def markdown(rows: list[dict]) -> str:
             eps = [r for r in rows if r["run"] == name and r["mode"] == mode]
             if not eps:
                 continue
-            first = mode not in base
-            base.setdefault(mode, {(r["task"], r["seed"]): r["success"] for r in eps})
-            wl = "-" if first else dev_runs.won_lost(base[mode], eps)
+            wl = dev_runs.against_first(base, mode, eps)
             hashes = ", ".join(sorted({str(r["checkpoint_hash"]) for r in eps}))
             lines.append(f"| {label} (`{hashes}`) | {mode} | " + " | ".join(dev_runs.per_suite(eps))
                          + f" | **{dev_runs.frac(eps)}** | {wl} |")

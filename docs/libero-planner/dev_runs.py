@@ -73,6 +73,15 @@ def won_lost(base: dict, eps: list[dict]) -> str:
     return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
 
 
+def against_first(base: dict, key, eps: list[dict]) -> str:
+    """Won / lost of ``eps`` against the first rows seen under ``key``; those first rows become its baseline (kept
+    in ``base``) and get "-"."""
+    if key not in base:
+        base[key] = {(e["task"], e["seed"]): e["success"] for e in eps}
+        return "-"
+    return won_lost(base[key], eps)
+
+
 SUITE_KEEP = ("task", "suite", "mode", "seed", "success", "stopped_by", "premature_stop")
 
 
@@ -103,9 +112,7 @@ def model_table(rows: list[dict], table_rows, suite: str, first_seed: int = 2000
         if not eps:
             continue
         seeds = sorted({s for _, s in eps})
-        first = mode not in base
-        base.setdefault(mode, {k: e["success"] for k, e in eps.items()})
-        wl = "-" if first else won_lost(base[mode], list(eps.values()))
+        wl = against_first(base, mode, list(eps.values()))
         k = sum(e["success"] for e in eps.values())
         out.append(f"| {ck} | {how} | {mode} | {seeds[0]}-{seeds[-1]} ({len(eps)}) | **{k}/{len(eps)}** | {wl} |")
         if len(seeds) == 6:
@@ -141,9 +148,7 @@ def checkpoint_table(rows: list[dict], runs) -> list[str]:
         eps = by.get((name, mode))
         if not eps:
             continue
-        first = mode not in base
-        base.setdefault(mode, {(e["task"], e["seed"]): e["success"] for e in eps})
-        wl = "-" if first else won_lost(base[mode], eps)
+        wl = against_first(base, mode, eps)
         out.append(f"| {ck} | {mode} | " + " | ".join(per_suite(eps))
                    + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
     return out
