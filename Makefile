@@ -116,9 +116,10 @@ libero-oracle-eval: setup
 # every 3rd planner step (LIBERO frames cost 28-80 ms); the collection resumes (episodes already in the file are
 # kept). LIBERO_PLANNER_EPISODES demonstrations per task (the issue asks 50):
 #  * 100 (default; the shipped four-suite checkpoint since stop 54): today's oracle, one run from nothing,
-#    train_libero100.yaml (48 epochs, about 2.5 h on 2 cores), longer than a session: `tcot train --resume` continues
-#    it from its last epoch (runs/libero/planner100.resume.pt), so `make libero-planner` again after a cut goes on
-#    where it stopped. It builds the four-suite default only: libero_10's own model and the direct baseline come
+#    train_libero100.yaml (48 epochs, about 2.5 h on 2 cores), then 8 epochs on the commanded corner labels,
+#    train_libero100_corner.yaml (33 min; the shipped one since stop 55); longer than a session: `tcot train --resume`
+#    continues a run from its last epoch (runs/libero/<run>.resume.pt), so `make libero-planner` again after a cut
+#    goes on where it stopped. It builds the four-suite default only: libero_10's own model and the direct baseline come
 #    from the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
 #    and then `make libero-planner`;
 #  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
@@ -152,8 +153,10 @@ libero-planner: setup
 		> docs/libero-planner/$(LIBERO_PLANNER_COLLECT_LOG) 2>&1 || (tail -5 docs/libero-planner/$(LIBERO_PLANNER_COLLECT_LOG); exit 1)
 ifeq ($(LIBERO_PLANNER_EPISODES),100)
 	$(call libero_train_resumable,train_libero100,planner100,train100,)
-	cp runs/libero/planner100.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
-	cp runs/libero/planner100.json tcot_hybrid/checkpoints/libero_panda_default.json
+	# then on the commanded path at its corners (stop 55: the observed path's labels never push the stove knob)
+	$(call libero_train_resumable,train_libero100_corner,planner100_corner,train100_corner,)
+	cp runs/libero/planner100_corner.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
+	cp runs/libero/planner100_corner.json tcot_hybrid/checkpoints/libero_panda_default.json
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --data $(LIBERO_PLANNER_DATA) --out docs/libero-planner/heldout-100.json
 else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \

@@ -1,8 +1,9 @@
-"""Whether a 97-point window of the commanded path, each piece's points at its corners, replaces the shipped
-checkpoint (docs/libero-planner.md, "A longer global window"), on sampled development layouts (docs/seeds.md: seeds
-20000+, never the shipped init states, never 90000+): v4 (examples/configs/train_libero_v4.yaml, the first 1000
-demos) and v5 (train_libero_v5.yaml, all 2000), both continued from the shipped weights, and v9
-(train_libero_v9.yaml, the same labels from nothing). Each trial's checkpoints run on the same machine at commits whose
+"""Whether a window of the commanded path, each piece's points at its corners, replaces the shipped checkpoint
+(docs/libero-planner.md, "A longer global window" and "100 demonstrations per task"), on sampled development layouts
+(docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+): 97 points in v4
+(examples/configs/train_libero_v4.yaml, the first 1000 demos) and v5 (train_libero_v5.yaml, all 2000), both continued
+from the shipped weights, and v9 (train_libero_v9.yaml, the same labels from nothing); 51 points in v12
+(train_libero100_corner.yaml, the 100-demos checkpoint continued on its own 4000 demos). Each trial's checkpoints run on the same machine at commits whose
 episodes run alike, so its baseline is not an older model's run:
 
     .venv/bin/python docs/libero-planner/corner_window.py --gather   # runs/dev/* -> corner_window.json
@@ -33,6 +34,8 @@ TRIALS = {
                                 "runs/libero/planner_v9.safetensors",
                                 "the shipped checkpoint at 28817e1 (stop 43's baseline run), v9 at d9d1e0a: between "
                                 "them only training code, the checkpoint metadata check and docs changed"),
+    "libero-corner-window-v12": (20055, "shipped12", "v12", "v12 (51 corner points, commanded path, 100 demos a task)",
+                                 "runs/libero/planner100_corner.safetensors", SAME_COMMIT),
 }
 
 

@@ -43,7 +43,8 @@ def build_lines() -> list[str]:
     meta = json.loads(meta_p.read_text())
     tc = meta["train_config"]
     out = str(tc.get("out", ""))
-    hundred = out.endswith("planner100.safetensors")  # the 100-per-task recipe: its own collection and log
+    # the 100-per-task recipe (its own collection and log), the run from nothing or its corner-label fine-tune
+    hundred = out.endswith(("planner100.safetensors", "planner100_corner.safetensors"))
     log = HERE / ("collect_100.log" if hundred else "collect.log")
     m = None
     if log.is_file():
@@ -67,8 +68,10 @@ def build_lines() -> list[str]:
                      f"{sum(float(p[4]) for p in parts) / 60:.1f} min wall with 2 workers; "
                      f"{sum(int(p[2]) for p in parts)} unsuccessful, {sum(int(p[3]) for p in parts)} crashed).")
     runs = [("train", "examples/configs/train_libero.yaml")]
-    if hundred:  # the 100-per-task recipe: one resumable run from nothing
+    if hundred:  # the 100-per-task recipe: one resumable run from nothing, then the corner labels from its weights
         runs = [("train100", "examples/configs/train_libero100.yaml")]
+        if out.endswith("planner100_corner.safetensors"):
+            runs.append(("train100_corner", "examples/configs/train_libero100_corner.yaml"))
     elif out.endswith("planner50.safetensors"):  # the 50-per-task recipe: one resumable run
         runs = [("train50", "examples/configs/train_libero50.yaml")]
     elif "planner_v2" in out:  # ... fine-tuned on the demos recollected through the release
