@@ -374,6 +374,11 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
             how += ", " + _checkpoint_note(eps, f"libero_panda_{folder.name}")
         lines.append(f"- {SUITE_ROW.split(' (')[0]}, {folder.name} (`{folder.relative_to(ROOT)}/`): {how}; "
                      f"{sum(bool(e['fault']) for e in eps)} faulted, none counted as a success.")
+    glsr = by.get(("learned", "glsr"))
+    if suite_eps and glsr:  # the defaults row borrows the four-suite GLSR row's episodes where no own model ran
+        own = sorted({e["suite"] for e in suite_eps})
+        lines.append(f"- {DEFAULTS_ROW.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other suites "
+                     f"from the four-suite GLSR row ({_checkpoint_note(glsr, 'libero_panda_default')}).")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
