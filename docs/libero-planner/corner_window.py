@@ -3,8 +3,8 @@
 (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+): 97 points in v4
 (examples/configs/train_libero_v4.yaml, the first 1000 demos) and v5 (train_libero_v5.yaml, all 2000), both continued
 from the shipped weights, and v9 (train_libero_v9.yaml, the same labels from nothing); 51 points in v12
-(train_libero100_corner.yaml, the 100-demos checkpoint continued on its own 4000 demos). Each trial's checkpoints run on the same machine at commits whose
-episodes run alike, so its baseline is not an older model's run:
+(train_libero100_corner.yaml, the 100-demos checkpoint continued on its own 4000 demos). Each trial's checkpoints
+run on the same machine at commits whose episodes run alike, so its baseline is not an older model's run:
 
     .venv/bin/python docs/libero-planner/corner_window.py --gather   # runs/dev/* -> corner_window.json
     .venv/bin/python docs/libero-planner/corner_window.py            # corner_window.json -> docs/libero-planner.md
