@@ -1,5 +1,6 @@
 """The paper's-protocol tables (docs/libero-planner/protocol.py): a row cut off midway is carried to another machine
-whole (what the detector figures read included), and a row still running never reaches the tables."""
+whole (what the detector figures read included), a row still running never reaches the tables, and a row names the
+checkpoint it ran."""
 import importlib
 import json
 import sys
@@ -105,3 +106,17 @@ def test_a_row_resumed_at_another_commit_names_every_commit_its_parts_started_at
     (tmp_path / "eval.json").write_text(json.dumps({"episodes": 2000, "ran_now": 2000}))
     assert protocol.keep_row(tmp_path, "learned", "glsr", "b00c0de")
     assert (tmp_path / "eval-learned-glsr.commit").read_text() == "b00c0de\n"
+
+
+def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(protocol):
+    def with_hash(e, checkpoint):
+        return {**e, "checkpoint_hash": checkpoint, "max_reference_limit_excess_rad": 0.0}
+
+    glsr = [with_hash(_episode(s, "t", i, True), "0ld0ld0ld0ld0ld0")
+            for s in ("libero_spatial", "libero_object", "libero_goal", "libero_10") for i in range(2)]
+    own = [with_hash(_episode("libero_10", "t", i, True), "5u1te5u1te5u1te5") for i in range(2)]
+    lines = protocol.table1_lines({("learned", "glsr"): glsr}, own)
+    note = [x for x in lines if x.startswith(f"- {protocol.DEFAULTS_ROW.split(' (')[0]}:")]
+    assert len(note) == 1
+    assert "libero_10 from the suite models' rows" in note[0]
+    assert "`0ld0ld0ld0ld0ld0`, **not the one shipped now**" in note[0]
