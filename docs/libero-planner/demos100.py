@@ -35,20 +35,14 @@ def gather() -> None:
 
 
 def markdown(rows: list[dict]) -> str:
+    def label(name: str, mode: str) -> str:
+        hashes = ", ".join(sorted({str(r["checkpoint_hash"]) for r in rows if r["run"] == name and r["mode"] == mode}))
+        return f"{RUNS[name][0]} (`{hashes}`)"
+
+    runs = [(name, mode, label(name, mode), None) for name in RUNS for mode in ("global", "glsr")]
     lines = [f"`{EVAL}`, each checkpoint by `--checkpoint`, the same stack code (the baseline on 1 worker, the "
              "candidate on 2; `docs/libero-planner/demos100.py` → `demos100.jsonl`); successes per suite, and won / "
-             "lost against the first row on the same layouts:", "",
-             "| checkpoint | mode | " + " | ".join(dev_runs.SUITES) + " | all | won / lost |", "|" + "---|" * 8]
-    base: dict = {}
-    for name, (label, _) in RUNS.items():
-        for mode in ("global", "glsr"):
-            eps = [r for r in rows if r["run"] == name and r["mode"] == mode]
-            if not eps:
-                continue
-            wl = dev_runs.against_first(base, mode, eps)
-            hashes = ", ".join(sorted({str(r["checkpoint_hash"]) for r in eps}))
-            lines.append(f"| {label} (`{hashes}`) | {mode} | " + " | ".join(dev_runs.per_suite(eps))
-                         + f" | **{dev_runs.frac(eps)}** | {wl} |")
+             "lost against the first row on the same layouts:", ""] + dev_runs.checkpoint_table(rows, runs)
     return "\n".join(lines) + "\n"
 
 
