@@ -18,7 +18,7 @@ import numpy as np
 from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.config import require_nonnegative, require_positive
 from tcot_hybrid.errors import LiftError, TcotError, TrajectoryError
-from tcot_hybrid.ik import IKSolver, IKTarget
+from tcot_hybrid.ik import IKSolver, IKTarget, rotation_angle
 from tcot_hybrid.lift import LiftConfig, lift_waypoints
 from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.robot import R_DOWN
@@ -85,14 +85,17 @@ class ExecutorConfig:
                       Down: more starts sent home; None (YAML null) = off: plan from
                       where the arm stands, and a retry from home returns to that start. [rad]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
-                      is the same grasp. When a waypoint's IK did not converge or a joint limit shaped its solution,
+                      is the same grasp. When a waypoint's IK did not converge, a joint limit shaped its solution, or
+                      the hand is asked to turn more than ``TWIN_TURN_RAD`` (90 degrees) from where the arm holds it,
                       the twin is solved from the same seed and taken when it converges where the other missed by
                       more than ``TWIN_MISS_M``, or moves the arm less without converging less; the waypoints after it
-                      are then asked turned too, until a twin is better again (event ``hand_turned``). Learned plans choose between the two
-                      by the hand's yaw (planners/learned.py ``canonical_hand``), which cannot see the arm: a level
-                      hand reaching for a bottle by the robot's base was solved with joint 7 at its limit and the
-                      next waypoints stopped 8-12 cm short (docs/libero-planner.md, "Air drag and the wrist's half
-                      turn"). False: orientations as planned.
+                      are then asked turned too, until a twin is better again (event ``hand_turned``). Learned plans
+                      choose between the two by the hand's yaw (planners/learned.py ``canonical_hand``), which cannot
+                      see the arm: a level hand reaching for a bottle by the robot's base was solved with joint 7 at
+                      its limit and the next waypoints stopped 8-12 cm short (docs/libero-planner.md, "Air drag and
+                      the wrist's half turn"); a side grasp of the ketchup asked a 130-degree turn that IK made by
+                      swinging the whole arm to an elbow from which the carry could not reach the basket ("The hand
+                      the arm stands nearer"). False: orientations as planned.
     """
 
     blend_time_s: float = 0.15
@@ -193,6 +196,7 @@ _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a 
 
 
 TWIN_MISS_M = 0.03  # an IK answer this far from the waypoint is a miss the arm cannot make up for [m]
+TWIN_TURN_RAD = np.pi / 2  # a hand asked to turn further than this from where it stands: its twin may be the nearer
 
 
 def put_down_before_release(points: np.ndarray, grip: np.ndarray, closed_at: int) -> float | None:
@@ -361,7 +365,9 @@ class MotionExecutor:
             target = IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN)
         try:
             res = self.ik.solve(target, self._ik_seed)
-            if self.config.hand_twin and (not res.converged or res.limit_active):
+            if self.config.hand_twin and (
+                    not res.converged or res.limit_active
+                    or rotation_angle(self.ik.tcp_pose(self._ik_seed)[1], target.rot) > TWIN_TURN_RAD):
                 twin = self.ik.solve(IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN), self._ik_seed)
                 if _twin_is_better(twin, res, self._ik_seed):
                     self._hand_turned = not self._hand_turned

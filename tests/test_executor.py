@@ -182,9 +182,10 @@ def test_a_reflex_brake_away_from_the_limits_stops_from_the_measured_state():
     np.testing.assert_allclose(ex.smoother.reference.q, sim.q)
 
 
-def _turned_hand_run(hand_twin: bool):
-    """The workcell arm asked for its hand 3 cm lower and turned about its approach axis so far that joint 7 would
-    end 0.4 rad past its upper limit; returns (events, planned R, goal, final TCP, final R, joint travel)."""
+def _turned_hand_run(hand_twin: bool, turn: float | None = None):
+    """The workcell arm asked for its hand 3 cm lower and turned about its approach axis by ``turn`` [rad] (None: so
+    far that joint 7 would end 0.4 rad past its upper limit); returns (events, planned R, goal, final TCP, final R,
+    joint travel)."""
     from tcot_hybrid.episode import EpisodeRunner
     from tcot_hybrid.plan import WaypointPlan
     from tcot_hybrid.run_config import RunConfig
@@ -193,7 +194,8 @@ def _turned_hand_run(hand_twin: bool):
     r.settle()
     ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
     q0 = sim.q.copy()
-    turn = sim.robot.q_max[6] - q0[6] + 0.4
+    if turn is None:
+        turn = sim.robot.q_max[6] - q0[6] + 0.4
     c, s = np.cos(turn), np.sin(turn)
     _, R_now = ex.dyn.ee_pose()
     R = R_now @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # about the TCP's own z
@@ -224,6 +226,27 @@ def test_a_hand_past_joint_7s_limit_is_reached_by_its_half_turned_twin():
     assert not [e for e in events_off if e["kind"] == "hand_turned"]
     assert np.abs(R_off[:, :2] - R[:, :2]).max() < 0.02 or [e for e in events_off if e["kind"] == "ik_not_converged"]
     assert travel < travel_off, "the twin is the shorter way for the arm"
+
+
+def test_a_hand_asked_more_than_a_quarter_turn_is_reached_by_the_nearer_twin():
+    """A hand asked to turn 130 degrees about its approach axis, which IK reaches inside the limits by turning the wrist
+    all that way, is reached by its twin, 50 degrees the other way, with less joint travel (a learned side grasp of the
+    ketchup asked such a turn and the arm carried the bottle from an elbow it could not reach the basket with:
+    docs/libero-planner.md, "The hand the arm stands nearer"); a hand asked 80 degrees is asked as planned."""
+    events, R, goal, tcp, R_end, travel = _turned_hand_run(True, turn=-np.radians(130.0))
+    turned = [e for e in events if e["kind"] == "hand_turned"]
+    assert len(turned) == 1 and turned[0]["turned"]
+    assert turned[0]["other_converged"] and not turned[0]["other_limit_active"]  # the turn alone asked for the twin
+    np.testing.assert_allclose(tcp, goal, atol=0.01)
+    np.testing.assert_allclose(R_end[:, 2], R[:, 2], atol=0.02)
+    np.testing.assert_allclose(R_end[:, :2], -R[:, :2], atol=0.02)
+    _, _, _, _, R_off, travel_off = _turned_hand_run(False, turn=-np.radians(130.0))
+    np.testing.assert_allclose(R_off, R, atol=0.02)  # without the twin the whole turn is made
+    assert travel < travel_off - 1.0
+    events, R, goal, tcp, R_end, _ = _turned_hand_run(True, turn=-np.radians(80.0))
+    assert not [e for e in events if e["kind"] == "hand_turned"]
+    np.testing.assert_allclose(R_end, R, atol=0.02)
+    np.testing.assert_allclose(tcp, goal, atol=0.01)
 
 
 def test_go_home_rises_straight_up_then_returns_to_the_starting_posture():

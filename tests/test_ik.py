@@ -222,6 +222,22 @@ def test_reachable_targets_converge_and_fk_matches(robot, backend):
 
 
 @pytest.mark.parametrize("robot, backend", COMBOS)
+def test_tcp_pose_is_the_forward_kinematics_and_refuses_a_bad_q(robot, backend):
+    ik = solver(robot, backend)
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        q = rng.uniform(ik.lower, ik.upper)
+        p, R = ik.tcp_pose(q)
+        p_ref, R_ref = fk(robot, q)  # MuJoCo's, independent of the backend's model
+        np.testing.assert_allclose(p, p_ref, atol=1e-9)
+        assert rotation_angle(R, R_ref) < 1e-8
+    for match, q in {"q must be finite": np.full(ik.dof, np.nan), "q must have shape": np.zeros(ik.dof - 1),
+                     "q must be a numeric": ["a"] * ik.dof}.items():
+        with pytest.raises(IKError, match=match):
+            ik.tcp_pose(q)
+
+
+@pytest.mark.parametrize("robot, backend", COMBOS)
 def test_strong_posture_far_from_home_does_not_bias_the_solution(robot, backend):
     """The posture pull is released near the target, so 1.2 rad from home a 2x default posture_cost
     still converges to tolerance (a permanent pull left up to 18 mm error; 8/10 cases failed)."""

@@ -12,7 +12,6 @@ run on the same machine at commits whose episodes run alike, so its baseline is 
 from __future__ import annotations
 
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
@@ -56,16 +55,6 @@ def gather() -> None:
         {"run": name, **{k: e.get(k) for k in KEEP}} if e["perturb"] == "none" else None))
 
 
-def changed_tasks(rows: list[dict], mode: str, base: str, run: str) -> str:
-    """Tasks whose successes differ between the shipped checkpoint (run ``base``) and the candidate in ``mode``."""
-    count: dict = defaultdict(lambda: defaultdict(int))
-    for r in rows:
-        if r["mode"] == mode:
-            count[r["task"].split(":", 1)[1]][r["run"]] += r["success"]
-    diff = [f"{t} {c[base]} -> {c[run]}" for t, c in sorted(count.items()) if c[base] != c[run]]
-    return f"Tasks whose count differs in {mode} (of 2, shipped -> {run}): " + ("; ".join(diff) or "none") + "."
-
-
 def lines(section: str) -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
     seed, base, run, _, _, where = TRIALS[section]
@@ -73,7 +62,8 @@ def lines(section: str) -> list[str]:
     return ([f"Sampled development layouts {seed}-{seed + 1}, all 40 tasks, {where} (successes / episodes; won and "
              "lost against the shipped checkpoint in the same mode on the same layouts):", ""]
             + dev_runs.checkpoint_table(rows, runs)
-            + ["", changed_tasks(rows, "global", base, run), "", changed_tasks(rows, "glsr", base, run)]
+            + ["", dev_runs.changed_tasks(rows, "global", base, run, 2, "shipped"), "",
+               dev_runs.changed_tasks(rows, "glsr", base, run, 2, "shipped")]
             + dev_runs.command_lines("corner_window.py", 2, dict((n, c) for n, _, _, c in runs).items()))
 
 

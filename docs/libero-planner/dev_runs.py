@@ -136,13 +136,14 @@ def per_mode(runs) -> tuple:
     return tuple((run, mode, label, cmd) for run, label, cmd in runs for mode in ("global", "glsr"))
 
 
-def checkpoint_table(rows: list[dict], runs) -> list[str]:
-    """Successes / episodes per suite of each (run, mode, checkpoint label, command) in ``runs``, read from gathered
-    ``rows`` (each with its ``run``); each mode's first row is the baseline its won / lost counts against."""
+def checkpoint_table(rows: list[dict], runs, head: str = "checkpoint") -> list[str]:
+    """Successes / episodes per suite of each (run, mode, label, command) in ``runs``, read from gathered ``rows``
+    (each with its ``run``), the labels' column headed ``head``; each mode's first row is the baseline its won / lost
+    counts against."""
     by: dict = defaultdict(list)
     for r in rows:
         by[(r["run"], r["mode"])].append(r)
-    out = ["| checkpoint | mode | " + " | ".join(SUITES) + " | all four | won / lost |", "|" + "---|" * (len(SUITES) + 4)]
+    out = [f"| {head} | mode | " + " | ".join(SUITES) + " | all four | won / lost |", "|" + "---|" * (len(SUITES) + 4)]
     base: dict = {}
     for name, mode, ck, _ in runs:
         eps = by.get((name, mode))
@@ -152,6 +153,18 @@ def checkpoint_table(rows: list[dict], runs) -> list[str]:
         out.append(f"| {ck} | {mode} | " + " | ".join(per_suite(eps))
                    + f" | **{sum(e['success'] for e in eps)}/{len(eps)}** | {wl} |")
     return out
+
+
+def changed_tasks(rows: list[dict], mode: str, base: str, run: str, per_task: int, base_label: str) -> str:
+    """Tasks whose successes in ``mode`` differ between run ``base`` (called ``base_label``) and run ``run``, each of
+    ``per_task`` layouts, from gathered ``rows`` (each with its ``run``)."""
+    count: dict = defaultdict(lambda: defaultdict(int))
+    for r in rows:
+        if r["mode"] == mode:
+            count[r["task"].split(":", 1)[1]][r["run"]] += r["success"]
+    diff = [f"{t} {c[base]} -> {c[run]}" for t, c in sorted(count.items()) if c[base] != c[run]]
+    return (f"Tasks whose count differs in {mode} (of {per_task}, {base_label} -> {run}): " + ("; ".join(diff) or "none")
+            + ".")
 
 
 def command_lines(script: str, workers: int | str, runs: Iterable[tuple[str, str]]) -> list[str]:

@@ -1,6 +1,6 @@
 """One LIBERO episode's goal, traced: every ``--every`` planner steps the hand, the gripper command, and the world
-position of each object the task's goal predicates name with the bodies it touches; at the end each goal predicate's
-truth. A diagnostic for
+position of each object the task's goal predicates name with the bodies it touches, and the joints of any articulated
+fixture whose region they name; at the end each goal predicate's truth. A diagnostic for
 docs/libero-planner.md ("The bottom drawer: a bowl carried out again"); nothing is saved.
 
     MUJOCO_GL=egl .venv/bin/python docs/libero-planner/goal_trace.py --task TASK --seed 20026 [--planner oracle]
@@ -33,8 +33,14 @@ def main() -> None:
     goals = env.parsed_problem["goal_state"]
     names = sorted({n for g in goals for n in g[1:] if n in env.objects_dict})
     bodies = {n: m.body(env.objects_dict[n].root_body).id for n in names}
-    print("| step | hand [m] | gripper | " + " | ".join(f"{n} [m], touching" for n in names) + " |")
-    print("|---|---|---|" + "---|" * len(names))
+    # a goal on a region of an articulated fixture (a drawer, a door, a knob): that fixture's joints
+    parents = {getattr(env.object_states_dict.get(n), "parent_name", None) for g in goals for n in g[1:]
+               if n not in env.objects_dict}
+    joints = {m.joint(j).name: int(m.jnt_qposadr[j]) for j in range(m.njnt)
+              if any(p in env.fixtures_dict and (m.joint(j).name or "").startswith(p) for p in parents)}
+    columns = ["step", "hand [m]", "gripper"] + [f"{n} [m], touching" for n in names] + ["joints [m or rad]"] * bool(joints)
+    print("| " + " | ".join(columns) + " |")
+    print("|" + "---|" * len(columns))
 
     def touching(d, body: int) -> str:
         root = m.body_rootid[body]
@@ -51,10 +57,11 @@ def main() -> None:
         if step % a.every or not a.since <= step <= a.until:
             return
         sim = r.stack.sim
-        pos = " | ".join(f"{np.array2string(sim.data.xpos[bodies[n]], precision=3)}, {touching(sim.data, bodies[n])}"
-                         for n in names)
-        print(f"| {step} | {np.array2string(sim.tcp_pos(), precision=3)} | "
-              f"{'closed' if sim.gripper_closed_cmd() else 'open'} | {pos} |")
+        cells = [str(step), np.array2string(sim.tcp_pos(), precision=3), "closed" if sim.gripper_closed_cmd() else "open"]
+        cells += [f"{np.array2string(sim.data.xpos[bodies[n]], precision=3)}, {touching(sim.data, bodies[n])}"
+                  for n in names]
+        cells += [", ".join(f"{n} {sim.data.qpos[adr]:.3f}" for n, adr in joints.items())] * bool(joints)
+        print("| " + " | ".join(cells) + " |")
 
     runner.frame_hook = row
     with one_torch_thread():  # as `tcot run` and the evaluation's workers: an episode can turn on the last bits

@@ -305,6 +305,12 @@ class IKSolver(ABC):
         q = self._check_seed(seed)
         return self._solve(pos, rot, q)
 
+    def tcp_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forward kinematics: TCP position [m] (3,) and rotation (3, 3) at arm configuration ``q`` [rad], in the
+        frame targets are solved in. Raises IKError for a ``q`` of the wrong shape or not finite."""
+        pos, rot = self._tcp_at(self._check_seed(q, "q"))
+        return pos.copy(), rot.copy()
+
     def _solve(self, pos: np.ndarray, rot: np.ndarray, seed: np.ndarray) -> IKResult:
         """The iteration loop on validated inputs (``seed`` is a private float copy)."""
         cfg = self.config
@@ -418,15 +424,15 @@ class IKSolver(ABC):
             )
         return pos, rot
 
-    def _check_seed(self, seed: np.ndarray) -> np.ndarray:
+    def _check_seed(self, seed: np.ndarray, name: str = "seed") -> np.ndarray:
         try:
             q = np.array(seed, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise IKError(f"seed must be a numeric array of shape ({self.dof},), got {seed!r}") from exc
+            raise IKError(f"{name} must be a numeric array of shape ({self.dof},), got {seed!r}") from exc
         if q.shape != (self.dof,):
-            raise IKError(f"seed must have shape ({self.dof},) for robot {self.spec.name!r}, got shape {q.shape}")
+            raise IKError(f"{name} must have shape ({self.dof},) for robot {self.spec.name!r}, got shape {q.shape}")
         if not np.all(np.isfinite(q)):
-            raise IKError(f"seed must be finite, got {q.tolist()}")
+            raise IKError(f"{name} must be finite, got {q.tolist()}")
         return q
 
 
