@@ -86,7 +86,8 @@ class ExecutorConfig:
                       where the arm stands, and a retry from home returns to that start. [rad]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge, a joint limit shaped its solution, or
-                      the hand is asked to turn more than ``TWIN_TURN_RAD`` (90 degrees) from where the arm holds it,
+                      the hand is asked to turn more than ``TWIN_TURN_RAD`` (90 degrees) from the hand of the IK seed (the
+                      previous waypoint's answer),
                       the twin is solved from the same seed and taken when it converges where the other missed by
                       more than ``TWIN_MISS_M``, or moves the arm less without converging less; the waypoints after it
                       are then asked turned too, until a twin is better again (event ``hand_turned``). Learned plans
@@ -196,7 +197,7 @@ _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a 
 
 
 TWIN_MISS_M = 0.03  # an IK answer this far from the waypoint is a miss the arm cannot make up for [m]
-TWIN_TURN_RAD = np.pi / 2  # a hand asked to turn further than this from where it stands: its twin may be the nearer
+TWIN_TURN_RAD = np.pi / 2  # a hand asked to turn further than this from the IK seed's: its twin may be the nearer
 
 
 def put_down_before_release(points: np.ndarray, grip: np.ndarray, closed_at: int) -> float | None:

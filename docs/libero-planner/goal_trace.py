@@ -37,7 +37,7 @@ def main() -> None:
     parents = {getattr(env.object_states_dict.get(n), "parent_name", None) for g in goals for n in g[1:]
                if n not in env.objects_dict}
     joints = {m.joint(j).name: int(m.jnt_qposadr[j]) for j in range(m.njnt)
-              if any(p in env.fixtures_dict and (m.joint(j).name or "").startswith(p) for p in parents)}
+              if any(p in env.fixtures_dict and (m.joint(j).name or "").startswith(p + "_") for p in parents)}
     columns = ["step", "hand [m]", "gripper"] + [f"{n} [m], touching" for n in names] + ["joints [m or rad]"] * bool(joints)
     print("| " + " | ".join(columns) + " |")
     print("|" + "---|" * len(columns))

@@ -1,5 +1,5 @@
 """Whether the executor should also solve a hand's half-turned twin when a plan asks the hand to turn more than 90
-degrees from where the arm holds it (``executor.TWIN_TURN_RAD``; docs/libero-planner.md, "The hand the arm stands
+degrees from the hand of the previous waypoint's IK answer (``executor.TWIN_TURN_RAD``; docs/libero-planner.md, "The hand the arm stands
 nearer"), on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+).
 Same checkpoints (the stack's defaults: the four-suite v12 and libero_10's own model), same machine; the baseline ran at
 867c9b2, the commit before the rule:
