@@ -86,17 +86,18 @@ class ExecutorConfig:
                       where the arm stands, and a retry from home returns to that start. [rad]
     hand_twin:        the gripper is a parallel jaw, so a hand turned half a turn about its approach axis (TCP z)
                       is the same grasp. When a waypoint's IK did not converge, a joint limit shaped its solution, or
-                      the hand is asked to turn more than ``TWIN_TURN_RAD`` (90 degrees) from the hand of the IK seed (the
-                      previous waypoint's answer),
-                      the twin is solved from the same seed and taken when it converges where the other missed by
-                      more than ``TWIN_MISS_M``, or moves the arm less without converging less; the waypoints after it
-                      are then asked turned too, until a twin is better again (event ``hand_turned``). Learned plans
-                      choose between the two by the hand's yaw (planners/learned.py ``canonical_hand``), which cannot
-                      see the arm: a level hand reaching for a bottle by the robot's base was solved with joint 7 at
-                      its limit and the next waypoints stopped 8-12 cm short (docs/libero-planner.md, "Air drag and
-                      the wrist's half turn"); a side grasp of the ketchup asked a 130-degree turn that IK made by
-                      swinging the whole arm to an elbow from which the carry could not reach the basket ("The hand
-                      the arm stands nearer"). False: orientations as planned.
+                      the hand is asked to turn more than ``TWIN_TURN_RAD`` (90 degrees) from the hand of the IK
+                      seed (the previous waypoint's answer), the twin is solved from the same seed and taken when it
+                      converges where the other missed by more than ``TWIN_MISS_M``, or moves the arm
+                      ``TWIN_TRAVEL_MARGIN_RAD`` (0.5 rad, summed over the joints) less without converging less; the
+                      waypoints after it are then asked turned too, until a twin is better again (event
+                      ``hand_turned``). Learned plans choose between the two by the hand's yaw
+                      (planners/learned.py ``canonical_hand``), which cannot see the arm: a level hand reaching for a
+                      bottle by the robot's base was solved with joint 7 at its limit and the next waypoints stopped
+                      8-12 cm short (docs/libero-planner.md, "Air drag and the wrist's half turn"); a side grasp of
+                      the ketchup asked a 130-degree turn that IK made by swinging the whole arm over, from where the
+                      carry could not reach the basket ("The hand the arm stands nearer"). False: orientations as
+                      planned.
     """
 
     blend_time_s: float = 0.15
@@ -197,6 +198,7 @@ _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a 
 
 
 TWIN_MISS_M = 0.03  # an IK answer this far from the waypoint is a miss the arm cannot make up for [m]
+TWIN_TRAVEL_MARGIN_RAD = 0.5  # joint travel [rad, summed] the twin must save to be taken for travel alone
 TWIN_TURN_RAD = np.pi / 2  # a hand asked to turn further than this from the IK seed's: its twin may be the nearer
 
 
@@ -212,14 +214,16 @@ def put_down_before_release(points: np.ndarray, grip: np.ndarray, closed_at: int
 
 def _twin_is_better(twin, other, seed: np.ndarray) -> bool:
     """The hand's twin solution beats the other: it converged where the other missed the point by more than
-    TWIN_MISS_M; or it moves the arm less from the seed without converging less. (A twin that converges only by a
-    long way round is not taken while the other is near: a wrist half turn under a carried object saturated joints
-    6 and 7 and tripped the tracking reflex where the unconverged answer, 3-17 mm off, still placed it.)"""
+    TWIN_MISS_M; or it moves the arm less from the seed, by more than TWIN_TRAVEL_MARGIN_RAD, without converging
+    less. (A twin that converges only by a long way round is not taken while the other is near: a wrist half turn
+    under a carried object saturated joints 6 and 7 and tripped the tracking reflex where the unconverged answer,
+    3-17 mm off, still placed it. Nor one that saves a few hundredths of a radian: mid-carry, both of a ketchup
+    bottle's hands swung the arm 5.9 rad, the twin 0.06 rad less, and the turned one tripped the reflex.)"""
     if twin.converged and not other.converged and other.pos_err > TWIN_MISS_M:
         return True
     if other.converged and not twin.converged:
         return False
-    return float(np.abs(twin.q - seed).sum()) < float(np.abs(other.q - seed).sum())
+    return float(np.abs(twin.q - seed).sum()) < float(np.abs(other.q - seed).sum()) - TWIN_TRAVEL_MARGIN_RAD
 
 
 class MotionExecutor:

@@ -228,6 +228,27 @@ def test_a_hand_past_joint_7s_limit_is_reached_by_its_half_turned_twin():
     assert travel < travel_off, "the twin is the shorter way for the arm"
 
 
+def test_the_twin_is_taken_for_travel_only_when_it_saves_more_than_the_margin():
+    """Two converged answers: the twin must move the arm TWIN_TRAVEL_MARGIN_RAD less to be taken (a twin 0.06 rad
+    shorter of a 5.9 rad mid-carry swing turned a carried bottle's hand and tripped the tracking reflex); a twin
+    that converges where the other missed by more than TWIN_MISS_M is taken whatever it travels."""
+    from types import SimpleNamespace
+
+    from tcot_hybrid.executor import TWIN_MISS_M, TWIN_TRAVEL_MARGIN_RAD, _twin_is_better
+
+    seed = np.zeros(7)
+
+    def answer(travel: float, converged: bool = True, miss: float = 0.0):
+        return SimpleNamespace(q=np.r_[travel, np.zeros(6)], converged=converged, pos_err=miss)
+
+    assert _twin_is_better(answer(2.19), answer(7.47), seed)
+    assert not _twin_is_better(answer(5.84), answer(5.90), seed)
+    assert not _twin_is_better(answer(5.90 - TWIN_TRAVEL_MARGIN_RAD + 0.01), answer(5.90), seed)
+    assert _twin_is_better(answer(5.90 - TWIN_TRAVEL_MARGIN_RAD - 0.01), answer(5.90), seed)
+    assert _twin_is_better(answer(9.0), answer(1.0, converged=False, miss=TWIN_MISS_M + 0.01), seed)
+    assert not _twin_is_better(answer(0.1, converged=False), answer(5.0), seed)
+
+
 def test_a_hand_asked_more_than_a_quarter_turn_is_reached_by_the_nearer_twin():
     """A hand asked to turn 130 degrees about its approach axis, which IK reaches inside the limits by turning the wrist
     all that way, is reached by its twin, 50 degrees the other way, with less joint travel (a learned side grasp of the

@@ -38,7 +38,8 @@ def main() -> None:
                if n not in env.objects_dict}
     joints = {m.joint(j).name: int(m.jnt_qposadr[j]) for j in range(m.njnt)
               if any(p in env.fixtures_dict and (m.joint(j).name or "").startswith(p + "_") for p in parents)}
-    columns = ["step", "hand [m]", "gripper"] + [f"{n} [m], touching" for n in names] + ["joints [m or rad]"] * bool(joints)
+    columns = (["step", "hand [m]", "gripper"] + [f"{n} [m], touching" for n in names]
+               + ["joints [m or rad]"] * bool(joints))
     print("| " + " | ".join(columns) + " |")
     print("|" + "---|" * len(columns))
 
@@ -57,7 +58,8 @@ def main() -> None:
         if step % a.every or not a.since <= step <= a.until:
             return
         sim = r.stack.sim
-        cells = [str(step), np.array2string(sim.tcp_pos(), precision=3), "closed" if sim.gripper_closed_cmd() else "open"]
+        cells = [str(step), np.array2string(sim.tcp_pos(), precision=3),
+                 "closed" if sim.gripper_closed_cmd() else "open"]
         cells += [f"{np.array2string(sim.data.xpos[bodies[n]], precision=3)}, {touching(sim.data, bodies[n])}"
                   for n in names]
         cells += [", ".join(f"{n} {sim.data.qpos[adr]:.3f}" for n, adr in joints.items())] * bool(joints)

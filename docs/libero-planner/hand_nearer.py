@@ -1,8 +1,10 @@
 """Whether the executor should also solve a hand's half-turned twin when a plan asks the hand to turn more than 90
-degrees from the hand of the previous waypoint's IK answer (``executor.TWIN_TURN_RAD``; docs/libero-planner.md, "The hand the arm stands
-nearer"), on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+).
-Same checkpoints (the stack's defaults: the four-suite v12 and libero_10's own model), same machine; the baseline ran at
-867c9b2, the commit before the rule:
+degrees from the hand of the previous waypoint's IK answer (``executor.TWIN_TURN_RAD``; docs/libero-planner.md, "The
+hand the arm stands nearer"), on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init
+states, never 90000+).
+Then the same with a margin: the twin taken for less joint travel alone only when it saves more than 0.5 rad
+(``executor.TWIN_TRAVEL_MARGIN_RAD``). Same checkpoints (the stack's defaults: the four-suite v12 and libero_10's own
+model), same machine; the baseline ran at 867c9b2, the commit before the first rule, the first rule alone at a27107c:
 
     .venv/bin/python docs/libero-planner/hand_nearer.py --gather   # runs/dev/* -> hand_nearer.json
     .venv/bin/python docs/libero-planner/hand_nearer.py            # hand_nearer.json -> docs/libero-planner.md
@@ -20,13 +22,16 @@ OUT = HERE / "hand_nearer.json"
 SECTION = "libero-hand-nearer"
 FIRST, PER_TASK = 20057, 4
 EVAL = f"tcot eval --suite {dev_runs.S4} --init sampled --episodes {PER_TASK} --seed-start {FIRST}"
-BEFORE, AFTER = "twin on a miss or a limit (867c9b2)", "and on a turn over 90 degrees"
+BEFORE, AFTER = "twin on a miss or a limit (867c9b2)", "and on a turn over 90 degrees (a27107c)"
+MARGIN = "and a 0.5 rad travel margin"
 # (run directory under runs/dev, mode, executor label, command); each mode's first row is its baseline
-LEARNED = dev_runs.per_mode((("twin_base", f"learned, {BEFORE}", f"{EVAL} --planners learned --modes glsr,global"
-                                                                 " (at 867c9b2)"),
-                             ("twin_turn", f"learned, {AFTER}", f"{EVAL} --planners learned --modes glsr,global")))
+LEARNED = dev_runs.per_mode((
+    ("twin_base", f"learned, {BEFORE}", f"{EVAL} --planners learned --modes glsr,global (at 867c9b2)"),
+    ("twin_turn", f"learned, {AFTER}", f"{EVAL} --planners learned --modes glsr,global (at a27107c)"),
+    ("twin_margin", f"learned, {MARGIN}", f"{EVAL} --planners learned --modes glsr,global")))
 ORACLE = (("twin_base_oracle", "global", f"oracle, {BEFORE}", f"{EVAL} --planners oracle --modes global (at 867c9b2)"),
-          ("twin_turn_oracle", "global", f"oracle, {AFTER}", f"{EVAL} --planners oracle --modes global"))
+          ("twin_turn_oracle", "global", f"oracle, {AFTER}", f"{EVAL} --planners oracle --modes global (at a27107c)"),
+          ("twin_margin_oracle", "global", f"oracle, {MARGIN}", f"{EVAL} --planners oracle --modes global"))
 KEEP = ("task", "suite", "mode", "seed", "success")
 
 
@@ -50,11 +55,13 @@ def lines() -> list[str]:
             + dev_runs.checkpoint_table(learned, LEARNED, head="planner, executor")
             + dev_runs.checkpoint_table(oracle, ORACLE, head="planner, executor")[2:]
             + ["", "Episodes with a `hand_turned` event: " + "; ".join(
-                f"{label}, {mode}: {counts.get((run, mode), 0)}" for run, mode, label, _ in LEARNED + ORACLE) + ".",
-               "", dev_runs.changed_tasks(learned, "global", "twin_base", "twin_turn", PER_TASK, "twin_base"), "",
-               dev_runs.changed_tasks(learned, "glsr", "twin_base", "twin_turn", PER_TASK, "twin_base"), "",
-               dev_runs.changed_tasks(oracle, "global", "twin_base_oracle", "twin_turn_oracle", PER_TASK,
-                                      "twin_base_oracle")]
+                f"{label}, {mode}: {counts.get((run, mode), 0)}" for run, mode, label, _ in LEARNED + ORACLE) + "."]
+            + [line for rows_, mode, base, run in ((learned, "global", "twin_base", "twin_turn"),
+                                                   (learned, "glsr", "twin_base", "twin_turn"),
+                                                   (learned, "global", "twin_turn", "twin_margin"),
+                                                   (learned, "glsr", "twin_turn", "twin_margin"),
+                                                   (oracle, "global", "twin_base_oracle", "twin_margin_oracle"))
+               for line in ("", dev_runs.changed_tasks(rows_, mode, base, run, PER_TASK, base))]
             + dev_runs.command_lines("hand_nearer.py", 2, _commands().items()))
 
 

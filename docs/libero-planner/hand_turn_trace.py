@@ -1,6 +1,6 @@
 """One LIBERO episode's waypoints as the executor solves them: for each, how far the plan asks the hand to turn from
-the hand of the IK seed (the previous waypoint's answer) and how far its half-turned twin lies, and what IK answers for each from the same seed
-(position miss, joint travel, a joint limit shaping it). A diagnostic for docs/libero-planner.md ("The hand the arm
+the hand of the IK seed (the previous waypoint's answer) and how far its half-turned twin lies, and what IK answers
+for each from the same seed (position miss, joint travel, a joint limit shaping it). A diagnostic for docs/libero-planner.md ("The hand the arm
 stands nearer"); nothing is saved. ``--before`` runs the executor as it was before a turn alone asked for the twin.
 
     MUJOCO_GL=egl .venv/bin/python docs/libero-planner/hand_turn_trace.py --seed 20026 [--before]

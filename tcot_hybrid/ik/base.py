@@ -307,7 +307,8 @@ class IKSolver(ABC):
 
     def tcp_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: TCP position [m] (3,) and rotation (3, 3) at arm configuration ``q`` [rad], in the
-        world frame of :meth:`_tcp_at` (the robot's base frame, where targets are solved). Raises IKError for a ``q`` of the wrong shape or not finite."""
+        world frame of :meth:`_tcp_at` (the robot's base frame, where targets are solved). Raises IKError for a
+        ``q`` of the wrong shape or not finite."""
         pos, rot = self._tcp_at(self._check_seed(q, "q"))
         return pos.copy(), rot.copy()
 
