@@ -363,17 +363,13 @@ class MotionExecutor:
             self._ik_seed = self._plan_q[i]
             self._set_target(self._plan_q[i], i)
             return
-        # Plans live in the world frame; IK solves in the robot's own base frame (identity in the workcell).
-        T = self.sim.T_base_world
-        target = IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=T[:3, :3] @ self.rots[i])
-        if self._hand_turned:
-            target = IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN)
+        target = self.ik_target(i, self._hand_turned)
         try:
             res = self.ik.solve(target, self._ik_seed)
             if self.config.hand_twin and (
                     not res.converged or res.limit_active
                     or rotation_angle(self.ik.tcp_pose(self._ik_seed)[1], target.rot) > TWIN_TURN_RAD):
-                twin = self.ik.solve(IKTarget(pos=target.pos, rot=target.rot @ _HALF_TURN), self._ik_seed)
+                twin = self.ik.solve(self.ik_target(i, not self._hand_turned), self._ik_seed)
                 if _twin_is_better(twin, res, self._ik_seed):
                     self._hand_turned = not self._hand_turned
                     self.event("hand_turned", waypoint=i, turned=self._hand_turned, converged=twin.converged,
@@ -389,6 +385,13 @@ class MotionExecutor:
                        rot_err_rad=round(res.rot_err, 5))
         self._ik_seed = res.q
         self._set_target(res.q, i)
+
+    def ik_target(self, i: int, turned: bool) -> IKTarget:
+        """Waypoint ``i`` as IK is asked it: in the robot's base frame (plans live in the world frame; identity in
+        the workcell), its hand turned half a turn about the approach axis when ``turned``."""
+        T = self.sim.T_base_world
+        rot = T[:3, :3] @ self.rots[i]
+        return IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=rot @ _HALF_TURN if turned else rot)
 
     def _set_target(self, q: np.ndarray, i: int) -> None:
         try:

@@ -19,7 +19,7 @@ KETCHUP = "libero_object:pick_up_the_ketchup_and_place_it_in_the_basket"
 def main() -> None:
     from tcot_hybrid import executor
     from tcot_hybrid.episode import EpisodeRunner
-    from tcot_hybrid.ik import IKTarget, rotation_angle
+    from tcot_hybrid.ik import rotation_angle
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", default=KETCHUP)
@@ -39,16 +39,14 @@ def main() -> None:
         activate(ex, i)
         if ex._plan_q is not None or ex.phase == "done":
             return
-        T = ex.sim.T_base_world
-        rot = T[:3, :3] @ ex.rots[i] @ (executor._HALF_TURN if turned else np.eye(3))
-        pos = T[:3, :3] @ ex.points[i] + T[:3, 3]
+        asked, twin = ex.ik_target(i, turned), ex.ik_target(i, not turned)
         held = ex.ik.tcp_pose(seed)[1]
         cells = []
-        for r in (rot, rot @ executor._HALF_TURN):
-            res = ex.ik.solve(IKTarget(pos=pos, rot=r), seed)
+        for target in (asked, twin):
+            res = ex.ik.solve(target, seed)
             cells.append(f"{res.pos_err:.3f}, {np.abs(res.q - seed).sum():.2f}, {'yes' if res.limit_active else 'no'}")
-        print(f"| {i} | {np.degrees(rotation_angle(held, rot)):.0f} | "
-              f"{np.degrees(rotation_angle(held, rot @ executor._HALF_TURN)):.0f} | {cells[0]} | {cells[1]} | "
+        print(f"| {i} | {np.degrees(rotation_angle(held, asked.rot)):.0f} | "
+              f"{np.degrees(rotation_angle(held, twin.rot)):.0f} | {cells[0]} | {cells[1]} | "
               f"{'yes' if ex._hand_turned != turned else 'no'} | {', '.join(e['kind'] for e in ex.events[n:])} |")
 
     executor.MotionExecutor._activate = traced
