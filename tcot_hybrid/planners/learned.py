@@ -70,8 +70,9 @@ class LearnedPlannerConfig:
                       (approach axis, TCP z, within ``SIDE_GRASP_MAX_ELEVATION_DEG`` of horizontal) is moved this far
                       further along the approach [m]. A pixel of the 128 px planner image is ~6 mm across the
                       table; a drawer handle pinched 6 mm short held it by the fingertips, which slid off
-                      half-way through the pull. 12 mm by measurement on development layouts
-                      (docs/libero-planner.md, "How deep a side grasp goes"). Needs the rotation head (LIBERO
+                      half-way through the pull. 6 mm by measurement on development layouts for the networks
+                      shipped now, which learned the commanded path (12 mm for the observed-path network before
+                      them; docs/libero-planner.md, "How deep a side grasp goes"). Needs the rotation head (LIBERO
                       checkpoints; workcell plans are top-down); 0 = off. Up: firmer hold on handles, the fingers
                       nearer what stands behind the handle.
     self_calibration: re-estimating the planner camera's pose from where the network sees the hand, once it
@@ -84,7 +85,7 @@ class LearnedPlannerConfig:
     dwell_leave_m: float | None = 0.03
     dwell_step_m: float = 0.01
     min_height_m: float = -0.02
-    side_grasp_depth_m: float = 0.012
+    side_grasp_depth_m: float = 0.006
     self_calibration: SelfCalibrationConfig = field(default_factory=SelfCalibrationConfig)
 
     def __post_init__(self) -> None:
