@@ -438,6 +438,25 @@ def test_stage2_finetune_from_checkpoint_with_extra_and_online_data(demo_file, e
                    model=ModelConfig(width=16)), progress=False, log=lambda *_: None)
 
 
+def test_a_finetune_keeps_its_inits_vocabulary_and_refuses_words_it_lacks(demo_file, tmp_path, camera):
+    """A suite's demonstrations alone continue a model trained on more instructions: the run keeps the init's word
+    ids (every instruction it read still encodes as before); a word the init never saw is refused, named."""
+    first = train(_cfg(demo_file, tmp_path / "v1.safetensors", max_epochs=1), progress=False, log=lambda *_: None)
+    words = load_checkpoint(first.checkpoint).meta["vocabulary"]
+    assert {"cube", "drawer"} <= set(words)
+    one_task = tmp_path / "drawer.hdf5"
+    make_demo_file(one_task, camera, seeds=range(12), T=24, instructions=("open the drawer",))
+    assert "cube" not in Vocabulary.build(instructions_of(one_task, "train")).tokens
+    res = train(_cfg(one_task, tmp_path / "v2.safetensors", max_epochs=1, stage1_epochs=0, init=str(first.checkpoint)),
+                progress=False, log=lambda *_: None)
+    assert load_checkpoint(res.checkpoint).meta["vocabulary"] == words
+    new_word = tmp_path / "close.hdf5"
+    make_demo_file(new_word, camera, seeds=range(12), T=24, instructions=("close the drawer",))
+    with pytest.raises(ConfigError, match=r"has no word for \['close'\]"):
+        train(_cfg(new_word, tmp_path / "v3.safetensors", max_epochs=1, init=str(first.checkpoint)),
+              progress=False, log=lambda *_: None)
+
+
 def test_a_longer_global_window_starts_from_a_shorter_windows_checkpoint(demo_file, tmp_path):
     ev = TrajectoryWindowConfig(global_spacing="events", L_g=25, points_per_segment=4)
     first = train(_cfg(demo_file, tmp_path / "w1.safetensors", max_epochs=1, windows=ev),

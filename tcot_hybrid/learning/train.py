@@ -149,6 +149,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     rng = np.random.default_rng(cfg.seed)
     env, camera, dof = env_of(cfg.data)
     vocab = Vocabulary.build(instructions_of(cfg.data, "train"))
+    if cfg.init:  # a fine-tune keeps its init's word ids, so a suite's file alone can continue a four-suite model
+        vocab = _init_vocabulary(cfg.init, vocab)
     mcfg = dataclasses.replace(cfg.model, vocab_size=len(vocab), dof=dof, n_global=cfg.windows.L_g,
                                n_local=cfg.windows.L_l + 1, image_px=int(env["height"]))
     if int(env["height"]) != int(env["width"]):
@@ -197,7 +199,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     if state is not None:
         pass  # the weights come from the saved state below
     elif cfg.init is not None:
-        _load_init(model, cfg.init, vocab, log, cfg.windows)
+        _load_init(model, cfg.init, log, cfg.windows)
     else:
         model.proprio_mean.copy_(tr.proprio.mean(0))
         model.proprio_std.copy_(tr.proprio.std(0).clamp_min(1e-3))
@@ -370,16 +372,28 @@ def _check_same_env(env: dict, other: dict, path: str, data: str) -> None:
         raise ConfigError(f"data file {path!r} has {diff} (the demonstrations {data!r})")
 
 
-def _load_init(model, path: str, vocab, log, windows) -> None:
-    """Copy a checkpoint's weights into ``model`` (fine-tuning); refuses another shape or vocabulary, but for a
+def _init_vocabulary(path: str, data_vocab):
+    """The vocabulary of init checkpoint ``path`` (its word embeddings are indexed by it), which a fine-tune keeps,
+    when it holds every word of the run's training instructions (``data_vocab``): a model continued on one suite's
+    demonstrations still reads the instructions of the others. ConfigError naming the words it lacks otherwise."""
+    from tcot_hybrid.learning.checkpoint import load_checkpoint
+    from tcot_hybrid.learning.vocab import Vocabulary
+
+    tokens = tuple(load_checkpoint(path).meta["vocabulary"])
+    missing = sorted(set(data_vocab.tokens) - set(tokens))
+    if missing:
+        raise ConfigError(f"init checkpoint {path!r} has no word for {missing} of the training instructions (its "
+                          f"vocabulary: {list(tokens)}); train from nothing, or from a checkpoint that knows them")
+    return Vocabulary(tokens)
+
+
+def _load_init(model, path: str, log, windows) -> None:
+    """Copy a checkpoint's weights into ``model`` (fine-tuning); refuses another shape, but for a
     longer global window on event-spaced labels (more global waypoints, each started from the checkpoint's
     waypoint at the same place in its piece: ``PlannerNet.load_widened``)."""
     from tcot_hybrid.learning.checkpoint import load_checkpoint
 
-    ck = load_checkpoint(path, kind=model.cfg.kind)
-    if tuple(ck.meta["vocabulary"]) != tuple(vocab.tokens):
-        raise ConfigError(f"init checkpoint {path!r} has vocabulary {ck.meta['vocabulary']}, the data gives "
-                          f"{list(vocab.tokens)}")
+    ck = load_checkpoint(path, kind=model.cfg.kind)  # its vocabulary is the run's (_init_vocabulary)
     mine = dataclasses.replace(model.cfg, readout_radius_cells=0)
     theirs = dataclasses.replace(ck.model.cfg, readout_radius_cells=0)
     add_head = mine.detect_head and not theirs.detect_head  # a shared-head checkpoint gains its own detect head
