@@ -119,15 +119,16 @@ libero-oracle-eval: setup
 #    train_libero100.yaml (48 epochs, about 2.5 h on 2 cores), then 8 epochs on the commanded corner labels,
 #    train_libero100_corner.yaml (33 min; the shipped one since stop 55); longer than a session: `tcot train --resume`
 #    continues a run from its last epoch (runs/libero/<run>.resume.pt), so `make libero-planner` again after a cut
-#    goes on where it stopped. It builds the four-suite default only: libero_10's own model and the direct baseline come
-#    from the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
+#    goes on where it stopped. It builds the four-suite default and, from it, libero_goal's own model
+#    (train_libero_goal_corner.yaml, 6 epochs on that suite's demonstrations, 19 min); libero_10's own model and the
+#    direct baseline come from the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
 #    and then `make libero-planner`;
 #  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
 #    model from it and the direct baseline, resumable the same way;
 #  * 10: the shipped 400-demo checkpoint's recipe, two runs (train_libero.yaml, then train_libero_finetune.yaml from
 #    its weights: the first alone was underfit).
 # The last run's checkpoint is copied to tcot_hybrid/checkpoints/libero_panda_default.*, which `--planner learned` picks
-# on LIBERO tasks of suites without their own model (libero_panda_<suite>.*: libero_10's, built after it); held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
+# on LIBERO tasks of suites without their own model (libero_panda_<suite>.*: libero_10's and libero_goal's, built after it); held-out errors go to docs/libero-planner/heldout*.json. The direct (next-action) baseline is trained
 # on the 50-per-task file (train_libero_direct.yaml, ~15 min; LIBERO_PLANNER_EPISODES=50 only) and copied to libero_panda_direct_default.*, which
 # `--planner direct` picks on LIBERO tasks.
 LIBERO_PLANNER_EPISODES ?= 100
@@ -157,6 +158,10 @@ ifeq ($(LIBERO_PLANNER_EPISODES),100)
 	$(call libero_train_resumable,train_libero100_corner,planner100_corner,train100_corner,)
 	cp runs/libero/planner100_corner.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner100_corner.json tcot_hybrid/checkpoints/libero_panda_default.json
+	# libero_goal's own model (stop 57): the model just copied, continued on that suite's demonstrations alone
+	$(call libero_train_resumable,train_libero_goal_corner,planner_libero_goal_corner,train_libero_goal_corner,)
+	cp runs/libero/planner_libero_goal_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_goal.safetensors
+	cp runs/libero/planner_libero_goal_corner.json tcot_hybrid/checkpoints/libero_panda_libero_goal.json
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --data $(LIBERO_PLANNER_DATA) --out docs/libero-planner/heldout-100.json
 else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \

@@ -326,6 +326,22 @@ def test_suite_models_continue_a_four_suite_model_on_their_suite_alone(suite, st
     assert own.data == v3.data  # the demonstrations collected through the release
 
 
+def test_the_goal_suites_corner_model_continues_the_shipped_four_suite_model_on_the_same_file():
+    """libero_goal's shipped model is v12 (the shipped four-suite checkpoint, train_libero100_corner's output)
+    continued on the goal demonstrations of v12's own file, with v12's network, labels and height reference."""
+    root = Path(__file__).resolve().parent.parent
+    v12, goal = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
+                 for x in ("100_corner", "_goal_corner"))
+    assert goal.suites == ("libero_goal",) and v12.suites == ()
+    assert goal.init == "tcot_hybrid/checkpoints/libero_panda_default.safetensors" and goal.data == v12.data
+    assert (goal.model, goal.windows, goal.height_ref) == (v12.model, v12.windows, v12.height_ref)
+    shipped = {stem: json.loads((root / "tcot_hybrid" / "checkpoints" / f"libero_panda_{stem}.json").read_text())
+               for stem in ("default", "libero_goal")}
+    assert shipped["default"]["train_config"]["out"] == v12.out
+    assert shipped["libero_goal"]["train_config"]["out"] == goal.out
+    assert shipped["libero_goal"]["vocabulary"] == shipped["default"]["vocabulary"]  # reads every suite's words
+
+
 @pytest.mark.parametrize("name", ["suites", "extra_data", "online_data"])
 def test_a_bare_string_for_a_list_field_is_refused(name):
     with pytest.raises(ConfigError, match=f"{name} must be a list.*write \\[x\\]"):

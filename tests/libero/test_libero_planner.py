@@ -90,10 +90,11 @@ def test_one_glsr_episode_with_the_tiny_planner(tiny_checkpoint):
 LONG_TASK = "libero_10:LIVING_ROOM_SCENE2_put_both_the_alphabet_soup_and_the_tomato_sauce_in_the_basket"
 
 
-@pytest.mark.parametrize("task, stem", [(LONG_TASK, "libero_panda_libero_10"), (SPATIAL_TASK, "libero_panda_default")])
+@pytest.mark.parametrize("task, stem", [(LONG_TASK, "libero_panda_libero_10"), (SPATIAL_TASK, "libero_panda_default"),
+                                        ("libero_goal:turn_on_the_stove", "libero_panda_libero_goal")])
 def test_learned_planner_loads_its_suites_own_shipped_model(task, stem):
-    """Without --checkpoint, a libero_10 task's learned planner is libero_10's own model (the paper's TCoT row),
-    a spatial task's the four-suite one; the resume key's checkpoint hash is that of the file loaded."""
+    """Without --checkpoint, a libero_10 or libero_goal task's learned planner is its suite's own model (the paper's
+    TCoT row), a spatial task's the four-suite one; the resume key's checkpoint hash is that of the file loaded."""
     from tcot_hybrid.evaluation.jobs import checkpoint_digest
 
     cfg = RunConfig(task=task, seed=0, init="shipped", planner="learned")
