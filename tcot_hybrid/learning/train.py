@@ -126,7 +126,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     import torch
     from tqdm import tqdm
 
-    from tcot_hybrid.learning.checkpoint import camera_meta, save_checkpoint, versions
+    from tcot_hybrid.learning.checkpoint import camera_meta, load_checkpoint, save_checkpoint, versions
     from tcot_hybrid.learning.data import (concat_frames, env_of, file_hash, instructions_of, load_frames,
                                            load_online_frames, online_split_size, tasks_of)
     from tcot_hybrid.learning.model import PlannerNet, count_parameters
@@ -149,8 +149,9 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     rng = np.random.default_rng(cfg.seed)
     env, camera, dof = env_of(cfg.data)
     vocab = Vocabulary.build(instructions_of(cfg.data, "train"))
-    if cfg.init:  # a fine-tune keeps its init's word ids, so a suite's file alone can continue a four-suite model
-        vocab = _init_vocabulary(cfg.init, vocab)
+    init = load_checkpoint(cfg.init, kind=cfg.model.kind) if cfg.init else None  # read once: words, then weights
+    if init is not None:  # a fine-tune keeps its init's word ids, so a suite's file alone can continue a four-suite model
+        vocab = _init_vocabulary(init, cfg.init, vocab)
     mcfg = dataclasses.replace(cfg.model, vocab_size=len(vocab), dof=dof, n_global=cfg.windows.L_g,
                                n_local=cfg.windows.L_l + 1, image_px=int(env["height"]))
     if int(env["height"]) != int(env["width"]):
@@ -199,7 +200,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
     if state is not None:
         pass  # the weights come from the saved state below
     elif cfg.init is not None:
-        _load_init(model, cfg.init, log, cfg.windows)
+        _load_init(model, init, cfg.init, log, cfg.windows)
     else:
         model.proprio_mean.copy_(tr.proprio.mean(0))
         model.proprio_std.copy_(tr.proprio.std(0).clamp_min(1e-3))
@@ -313,7 +314,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, log=print, resume: bool = 
             break
     model.load_state_dict(best_state)
     if cfg.trainable == "detect":
-        _check_only_detector_changed(model, cfg.init)
+        _check_only_detector_changed(model, init)
     model = model.to(memory_format=torch.contiguous_format).eval()
     from tcot_hybrid.data.dataset import camera_per_demo
 
@@ -372,14 +373,14 @@ def _check_same_env(env: dict, other: dict, path: str, data: str) -> None:
         raise ConfigError(f"data file {path!r} has {diff} (the demonstrations {data!r})")
 
 
-def _init_vocabulary(path: str, data_vocab):
-    """The vocabulary of init checkpoint ``path`` (its word embeddings are indexed by it), which a fine-tune keeps,
-    when it holds every word of the run's training instructions (``data_vocab``): a model continued on one suite's
-    demonstrations still reads the instructions of the others. ConfigError naming the words it lacks otherwise."""
-    from tcot_hybrid.learning.checkpoint import load_checkpoint
+def _init_vocabulary(ck, path: str, data_vocab):
+    """The vocabulary of init checkpoint ``ck`` (loaded from ``path``; its word embeddings are indexed by it), which
+    a fine-tune keeps, when it holds every word of the run's training instructions (``data_vocab``): a model continued
+    on one suite's demonstrations still reads the instructions of the others. ConfigError naming the words it lacks
+    otherwise."""
     from tcot_hybrid.learning.vocab import Vocabulary
 
-    tokens = tuple(load_checkpoint(path).meta["vocabulary"])
+    tokens = tuple(ck.meta["vocabulary"])
     missing = sorted(set(data_vocab.tokens) - set(tokens))
     if missing:
         raise ConfigError(f"init checkpoint {path!r} has no word for {missing} of the training instructions (its "
@@ -387,13 +388,11 @@ def _init_vocabulary(path: str, data_vocab):
     return Vocabulary(tokens)
 
 
-def _load_init(model, path: str, log, windows) -> None:
-    """Copy a checkpoint's weights into ``model`` (fine-tuning); refuses another shape, but for a
-    longer global window on event-spaced labels (more global waypoints, each started from the checkpoint's
-    waypoint at the same place in its piece: ``PlannerNet.load_widened``)."""
-    from tcot_hybrid.learning.checkpoint import load_checkpoint
-
-    ck = load_checkpoint(path, kind=model.cfg.kind)  # its vocabulary is the run's (_init_vocabulary)
+def _load_init(model, ck, path: str, log, windows) -> None:
+    """Copy checkpoint ``ck``'s weights (loaded from ``path``) into ``model`` (fine-tuning); its vocabulary is the
+    run's (:func:`_init_vocabulary`). Refuses another shape, but for a longer global window on event-spaced labels
+    (more global waypoints, each started from the checkpoint's waypoint at the same place in its piece:
+    ``PlannerNet.load_widened``)."""
     mine = dataclasses.replace(model.cfg, readout_radius_cells=0)
     theirs = dataclasses.replace(ck.model.cfg, readout_radius_cells=0)
     add_head = mine.detect_head and not theirs.detect_head  # a shared-head checkpoint gains its own detect head
@@ -446,13 +445,13 @@ def _row_mask(p, row: int):
     return mask
 
 
-def _check_only_detector_changed(model, init: str) -> None:
-    """After ``trainable: detect``: every weight a global or local output reads equals ``init``'s, bit for bit."""
+def _check_only_detector_changed(model, init) -> None:
+    """After ``trainable: detect``: every weight a global or local output reads equals the init checkpoint's
+    (``init``, as loaded before training: :func:`_load_init` copied its weights, so its own are untouched), bit for
+    bit."""
     import torch
 
-    from tcot_hybrid.learning.checkpoint import load_checkpoint
-
-    ref = load_checkpoint(init, kind=model.cfg.kind).model.state_dict()
+    ref = init.model.state_dict()
     detect = {name: row for name, _, row in model.detect_parameters()}
     for k, v in model.state_dict().items():
         if k not in ref or (k in detect and detect[k] is None):
