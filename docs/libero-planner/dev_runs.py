@@ -73,6 +73,24 @@ def won_lost(base: dict, eps: list[dict]) -> str:
     return f"{sum(b and not a for a, b in paired)} / {sum(a and not b for a, b in paired)}"
 
 
+def won_lost_keyed(base: dict, eps: dict) -> str:
+    """:func:`won_lost` of ``eps`` given as (task, seed) -> success, like ``base``."""
+    return won_lost(base, [{"task": t, "seed": s, "success": ok} for (t, s), ok in eps.items()])
+
+
+def per_task_table(columns: list[tuple[str, dict]]) -> list[str]:
+    """A markdown table of successes / episodes per task, one column per (header, (task, seed) -> success); "-"
+    where a column ran none of a task's layouts."""
+    out = ["| task | " + " | ".join(head for head, _ in columns) + " |", "|" + "---|" * (len(columns) + 1)]
+    for task in sorted({t for _, eps in columns for t, _ in eps}):
+        cells = []
+        for _, eps in columns:
+            got = [ok for (t, _), ok in eps.items() if t == task]
+            cells.append(f"{sum(got)}/{len(got)}" if got else "-")
+        out.append(f"| {task.split(':', 1)[1]} | " + " | ".join(cells) + " |")
+    return out
+
+
 def against_first(base: dict, key, eps: list[dict]) -> str:
     """Won / lost of ``eps`` against the first rows seen under ``key``; those first rows become its baseline (kept
     in ``base``) and get "-"."""

@@ -50,19 +50,10 @@ def lines() -> list[str]:
             eps = by[(label, mode)]
             per_run = [f"{sum(ok for (_, s), ok in eps.items() if a <= s <= a + 5)}/"
                        f"{sum(a <= s <= a + 5 for _, s in eps)}" for a in SEED_RANGES]
-            wl = "-" if label == labels[0] else dev_runs.won_lost(
-                base, [{"task": t, "seed": s, "success": ok} for (t, s), ok in eps.items()])
+            wl = "-" if label == labels[0] else dev_runs.won_lost_keyed(base, eps)
             out.append(f"| {label} | {mode} | " + " | ".join(per_run) + f" | **{sum(eps.values())}/{len(eps)}** | {wl} |")
-    cols = [(label, mode) for mode in ("global", "glsr") for label in labels]
-    out += ["", "Per task (all layouts):", "",
-            "| task | " + " | ".join(f"{label.split(' (')[0]}, {mode}" for label, mode in cols) + " |",
-            "|" + "---|" * (len(cols) + 1)]
-    for task in sorted({t for eps in by.values() for t, _ in eps}):
-        cells = []
-        for col in cols:
-            got = [ok for (t, _), ok in by[col].items() if t == task]
-            cells.append(f"{sum(got)}/{len(got)}")
-        out.append(f"| {task.split(':', 1)[1]} | " + " | ".join(cells) + " |")
+    out += ["", "Per task (all layouts):", ""] + dev_runs.per_task_table(
+        [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in ("global", "glsr") for label in labels])
     return out + dev_runs.command_lines("goal_corner.py", 2, ((name, cmd) for name, _, cmd in RUNS))
 
 

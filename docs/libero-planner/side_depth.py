@@ -58,21 +58,11 @@ def lines() -> list[str]:
             if not eps:
                 continue
             base = by.get((base_run[label], mode), {})
-            wl = "-" if depth == BASE else dev_runs.won_lost(
-                base, [{"task": t, "seed": s, "success": ok} for (t, s), ok in eps.items()])
+            wl = "-" if depth == BASE else dev_runs.won_lost_keyed(base, eps)
             out.append(f"| {label} | {depth * 1000:g} mm | {mode} | {len(eps)} | **{sum(eps.values())}** | {wl} |")
-    cols = [(name, label, depth, mode) for name, label, depth, _ in RUNS for mode in ("global", "glsr")
-            if by.get((name, mode))]
-    tasks = sorted({t for (name, _), eps in by.items() for t, _ in eps})
-    out += ["", "Per task:", "", "| task | " + " | ".join(f"{lab.split()[0]}, {d * 1000:g} mm, {m}"
-                                                         for _, lab, d, m in cols) + " |",
-            "|" + "---|" * (len(cols) + 1)]
-    for task in tasks:
-        cells = []
-        for name, _, _, mode in cols:
-            got = [ok for (t, _), ok in by[(name, mode)].items() if t == task]
-            cells.append(f"{sum(got)}/{len(got)}" if got else "-")
-        out.append(f"| {task.split(':', 1)[1]} | " + " | ".join(cells) + " |")
+    out += ["", "Per task:", ""] + dev_runs.per_task_table(
+        [(f"{label.split()[0]}, {depth * 1000:g} mm, {mode}", by[(name, mode)])
+         for name, label, depth, _ in RUNS for mode in ("global", "glsr") if by.get((name, mode))])
     return out + dev_runs.command_lines("side_depth.py", 2, ((name, cmd) for name, _, _, cmd in RUNS))
 
 
