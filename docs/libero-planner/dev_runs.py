@@ -185,6 +185,47 @@ def changed_tasks(rows: list[dict], mode: str, base: str, run: str, per_task: in
             + ".")
 
 
+def suite_model_runs(prefix: str, suite: str, seed_ranges: tuple[int, ...], layouts: int,
+                     models: tuple[tuple[str, str, str], ...]) -> tuple[tuple[str, str, str], ...]:
+    """The runs that judge a suite's own model against another on sampled development layouts: for each (short name,
+    label, `--checkpoint` flag) of ``models`` (the first is the baseline) and each first seed of ``seed_ranges``,
+    (run directory runs/dev/<prefix>_<short>[b...], label, command), global-only and GLSR, ``layouts`` layouts a task
+    a run."""
+    cmd = f"tcot eval --suite {suite} --planners learned --init sampled --episodes {layouts} --modes global,glsr"
+    return tuple((f"{prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
+                 for short, label, flag in models for k, first in enumerate(seed_ranges))
+
+
+def suite_model_lines(out: Path, runs: tuple[tuple[str, str, str], ...], suite: str, seed_ranges: tuple[int, ...],
+                      layouts: int, script: str) -> list[str]:
+    """The docs section of :func:`suite_model_runs`' episodes gathered in ``out``: successes per run and in all,
+    won / lost against the first model in the same mode on the same layouts, then per task."""
+    rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()]
+    by: dict = defaultdict(dict)  # (model label, mode) -> (task, seed) -> success
+    for r in rows:
+        label = next(lab for name, lab, _ in runs if name == r["run"])
+        by[(label, r["mode"])][(r["task"], r["seed"])] = r["success"]
+    labels = list(dict.fromkeys(lab for _, lab, _ in runs))
+    seeds = sorted({s for eps in by.values() for _, s in eps})
+    out_lines = [f"{suite} on sampled development layouts {seeds[0]}-{seeds[-1]} ({len(seeds)} a task, in "
+                 f"{len(seed_ranges)} runs of {layouts}); successes / episodes per run, won / lost against "
+                 f"{labels[0].split(' (')[0]} in the same mode on the same layouts:", "",
+                 "| model | mode | " + " | ".join(f"{a}-{a + layouts - 1}" for a in seed_ranges)
+                 + " | all | won / lost |", "|---|---|" + "---|" * (len(seed_ranges) + 2)]
+    for mode in ("global", "glsr"):
+        base = by[(labels[0], mode)]
+        for label in labels:
+            eps = by[(label, mode)]
+            per_run = [f"{sum(ok for (_, s), ok in eps.items() if a <= s < a + layouts)}/"
+                       f"{sum(a <= s < a + layouts for _, s in eps)}" for a in seed_ranges]
+            wl = "-" if label == labels[0] else won_lost_keyed(base, eps)
+            out_lines.append(f"| {label} | {mode} | " + " | ".join(per_run)
+                             + f" | **{sum(eps.values())}/{len(eps)}** | {wl} |")
+    out_lines += ["", "Per task (all layouts):", ""] + per_task_table(
+        [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in ("global", "glsr") for label in labels])
+    return out_lines + command_lines(script, 2, ((name, cmd) for name, _, cmd in runs))
+
+
 def command_lines(script: str, workers: int | str, runs: Iterable[tuple[str, str]]) -> list[str]:
     """The docs section's closing list: each (run directory under runs/dev, command) that ``script --gather`` reads."""
     return (["", f"Commands (each with `--workers {workers} --out runs/dev/<run>`; `{script} --gather` reads them):", ""]

@@ -1,0 +1,34 @@
+"""libero_10's own model from v12 (examples/configs/train_libero10_100_corner.yaml: the four-suite v12 widened to 97
+global points and continued on the suite's 100-demos demonstrations alone) against the libero_10 model shipped before
+it (the 50-demos lineage, train_libero10_corner.yaml), on sampled development layouts (docs/seeds.md: seeds 20000+,
+never the shipped init states, never 90000+), both at the same commit:
+
+    .venv/bin/python docs/libero-planner/l10_corner.py --gather   # runs/dev/* -> l10_corner.json
+    .venv/bin/python docs/libero-planner/l10_corner.py            # l10_corner.json -> docs/libero-planner.md
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "l10_corner.json"
+SECTION = "libero-10-corner"
+SUITE = "libero_10"
+SEED_RANGES = (20093,)  # fresh for libero_10 (docs/seeds.md), chosen before the run
+LAYOUTS = 8
+MODELS = (("shipped", "libero_10's model of the 50-demos lineage (shipped until stop 58)",
+           "--checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors"),
+          ("v12", "libero_10's own from v12 (97 points, 8 epochs on the suite)",
+           "--checkpoint runs/libero/planner_libero10_100_corner.safetensors"))
+RUNS = dev_runs.suite_model_runs("l10", SUITE, SEED_RANGES, LAYOUTS, MODELS)
+
+
+def gather() -> None:
+    dev_runs.gather_suite(((name, cmd) for name, _, cmd in RUNS), OUT, SUITE)
+
+
+if __name__ == "__main__":
+    dev_runs.main(__doc__, gather, lambda: dev_runs.suite_model_lines(OUT, RUNS, SUITE, SEED_RANGES, LAYOUTS,
+                                                                      "l10_corner.py"), SECTION)
