@@ -16,7 +16,7 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "l10_corner.json"
 SECTION = "libero-10-corner"
 SUITE = "libero_10"
-SEED_RANGES = (20093,)  # fresh for libero_10 (docs/seeds.md), chosen before the run
+SEED_RANGES = (20093, 20101)  # fresh for libero_10 (docs/seeds.md), chosen before the run; the second to confirm
 LAYOUTS = 8
 MODELS = (("shipped", "libero_10's model of the 50-demos lineage (shipped until stop 58)",
            "--checkpoint tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors"),
