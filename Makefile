@@ -120,8 +120,9 @@ libero-oracle-eval: setup
 #    train_libero100_corner.yaml (33 min; the shipped one since stop 55); longer than a session: `tcot train --resume`
 #    continues a run from its last epoch (runs/libero/<run>.resume.pt), so `make libero-planner` again after a cut
 #    goes on where it stopped. It builds the four-suite default and, from it, libero_goal's own model
-#    (train_libero_goal_corner.yaml, 6 epochs on that suite's demonstrations, 19 min); libero_10's own model and the
-#    direct baseline come from the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
+#    (train_libero_goal_corner.yaml, 6 epochs on that suite's demonstrations, 19 min) and libero_10's
+#    (train_libero10_100_corner.yaml, widened to 97 global points, 8 epochs, 38 min); the direct baseline comes from
+#    the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
 #    and then `make libero-planner`;
 #  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
 #    model from it and the direct baseline, resumable the same way;
@@ -162,6 +163,10 @@ ifeq ($(LIBERO_PLANNER_EPISODES),100)
 	$(call libero_train_resumable,train_libero_goal_corner,planner_libero_goal_corner,train_libero_goal_corner,)
 	cp runs/libero/planner_libero_goal_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_goal.safetensors
 	cp runs/libero/planner_libero_goal_corner.json tcot_hybrid/checkpoints/libero_panda_libero_goal.json
+	# libero_10's own model (stop 58): v12 widened to 97 global points, continued on that suite's demonstrations alone
+	$(call libero_train_resumable,train_libero10_100_corner,planner_libero10_100_corner,train_libero10_100_corner,)
+	cp runs/libero/planner_libero10_100_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
+	cp runs/libero/planner_libero10_100_corner.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --data $(LIBERO_PLANNER_DATA) --out docs/libero-planner/heldout-100.json
 else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \

@@ -326,20 +326,24 @@ def test_suite_models_continue_a_four_suite_model_on_their_suite_alone(suite, st
     assert own.data == v3.data  # the demonstrations collected through the release
 
 
-def test_the_goal_suites_corner_model_continues_the_shipped_four_suite_model_on_the_same_file():
-    """libero_goal's shipped model is v12 (the shipped four-suite checkpoint, train_libero100_corner's output)
-    continued on the goal demonstrations of v12's own file, with v12's network, labels and height reference."""
+@pytest.mark.parametrize("suite, stem", [("libero_goal", "_goal_corner"), ("libero_10", "10_100_corner")])
+def test_the_suites_corner_models_continue_the_shipped_four_suite_model_on_the_same_file(suite, stem):
+    """libero_goal's and libero_10's shipped models are v12 (the shipped four-suite checkpoint, train_libero100_corner's
+    output) continued on their suite's demonstrations of v12's own file, with v12's network, labels and height
+    reference; libero_10's global window is widened to 97 points (its long tasks replay best from it)."""
     root = Path(__file__).resolve().parent.parent
-    v12, goal = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
-                 for x in ("100_corner", "_goal_corner"))
-    assert goal.suites == ("libero_goal",) and v12.suites == ()
-    assert goal.init == "tcot_hybrid/checkpoints/libero_panda_default.safetensors" and goal.data == v12.data
-    assert (goal.model, goal.windows, goal.height_ref) == (v12.model, v12.windows, v12.height_ref)
+    v12, own = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
+                for x in ("100_corner", stem))
+    assert own.suites == (suite,) and v12.suites == ()
+    assert own.init == "tcot_hybrid/checkpoints/libero_panda_default.safetensors" and own.data == v12.data
+    assert (own.model, own.height_ref) == (v12.model, v12.height_ref)
+    longer = {"L_g": 97} if suite == "libero_10" else {}
+    assert own.windows == dataclasses.replace(v12.windows, **longer)
     shipped = {stem: json.loads((root / "tcot_hybrid" / "checkpoints" / f"libero_panda_{stem}.json").read_text())
-               for stem in ("default", "libero_goal")}
+               for stem in ("default", suite)}
     assert shipped["default"]["train_config"]["out"] == v12.out
-    assert shipped["libero_goal"]["train_config"]["out"] == goal.out
-    assert shipped["libero_goal"]["vocabulary"] == shipped["default"]["vocabulary"]  # reads every suite's words
+    assert shipped[suite]["train_config"]["out"] == own.out
+    assert shipped[suite]["vocabulary"] == shipped["default"]["vocabulary"]  # reads every suite's words
 
 
 @pytest.mark.parametrize("name", ["suites", "extra_data", "online_data"])
