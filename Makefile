@@ -121,7 +121,7 @@ libero-oracle-eval: setup
 #    continues a run from its last epoch (runs/libero/<run>.resume.pt), so `make libero-planner` again after a cut
 #    goes on where it stopped. It builds the four-suite default and, from it, libero_goal's own model
 #    (train_libero_goal_corner.yaml, 6 epochs on that suite's demonstrations, 19 min) and libero_10's
-#    (train_libero10_100_corner.yaml, widened to 97 global points, 8 epochs, 38 min); the direct baseline comes from
+#    (train_libero10_100_corner.yaml, widened to 97 global points, 8 epochs, 43 min); the direct baseline comes from
 #    the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
 #    and then `make libero-planner`;
 #  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
