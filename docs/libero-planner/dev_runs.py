@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from collections import defaultdict
 from pathlib import Path
 from typing import Callable, Iterable
@@ -185,45 +186,61 @@ def changed_tasks(rows: list[dict], mode: str, base: str, run: str, per_task: in
             + ".")
 
 
-def suite_model_runs(prefix: str, suite: str, seed_ranges: tuple[int, ...], layouts: int,
-                     models: tuple[tuple[str, str, str], ...]) -> tuple[tuple[str, str, str], ...]:
-    """The runs that judge a suite's own model against another on sampled development layouts: for each (short name,
-    label, `--checkpoint` flag) of ``models`` (the first is the baseline) and each first seed of ``seed_ranges``,
-    (run directory runs/dev/<prefix>_<short>[b...], label, command), global-only and GLSR, ``layouts`` layouts a task
-    a run."""
-    cmd = f"tcot eval --suite {suite} --planners learned --init sampled --episodes {layouts} --modes global,glsr"
-    return tuple((f"{prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
-                 for short, label, flag in models for k, first in enumerate(seed_ranges))
+@dataclass(frozen=True)
+class SuiteModelComparison:
+    """A suite's own model judged against another on sampled development layouts, global-only and GLSR: each of
+    ``models`` ((short name, label, `--checkpoint` flag); the first is the baseline) on ``layouts`` layouts a task
+    from each first seed of ``seed_ranges``, into runs/dev/<prefix>_<short>[b...]."""
 
+    prefix: str
+    suite: str
+    seed_ranges: tuple[int, ...]
+    layouts: int
+    models: tuple[tuple[str, str, str], ...]
 
-def suite_model_lines(out: Path, runs: tuple[tuple[str, str, str], ...], suite: str, seed_ranges: tuple[int, ...],
-                      layouts: int, script: str) -> list[str]:
-    """The docs section of :func:`suite_model_runs`' episodes gathered in ``out``: successes per run and in all,
-    won / lost against the first model in the same mode on the same layouts, then per task."""
-    rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()]
-    by: dict = defaultdict(dict)  # (model label, mode) -> (task, seed) -> success
-    for r in rows:
-        label = next(lab for name, lab, _ in runs if name == r["run"])
-        by[(label, r["mode"])][(r["task"], r["seed"])] = r["success"]
-    labels = list(dict.fromkeys(lab for _, lab, _ in runs))
-    seeds = sorted({s for eps in by.values() for _, s in eps})
-    out_lines = [f"{suite} on sampled development layouts {seeds[0]}-{seeds[-1]} ({len(seeds)} a task, in "
-                 f"{len(seed_ranges)} runs of {layouts}); successes / episodes per run, won / lost against "
+    @property
+    def runs(self) -> tuple[tuple[str, str, str], ...]:
+        """(run directory under runs/dev, model label, command) of every run."""
+        cmd = (f"tcot eval --suite {self.suite} --planners learned --init sampled --episodes {self.layouts} "
+               "--modes global,glsr")
+        return tuple((f"{self.prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
+                     for short, label, flag in self.models for k, first in enumerate(self.seed_ranges))
+
+    def lines(self, out: Path, script: str) -> list[str]:
+        """The docs section of the episodes gathered in ``out``: successes per run and in all, won / lost against
+        the first model in the same mode on the same layouts, then per task."""
+        runs, layouts = self.runs, self.layouts
+        by: dict = defaultdict(dict)  # (model label, mode) -> (task, seed) -> success
+        for r in (json.loads(x) for x in out.read_text().splitlines() if x.strip()):
+            label = next(lab for name, lab, _ in runs if name == r["run"])
+            by[(label, r["mode"])][(r["task"], r["seed"])] = r["success"]
+        labels = [label for _, label, _ in self.models]
+        seeds = sorted({s for eps in by.values() for _, s in eps})
+        lines = [f"{self.suite} on sampled development layouts {seeds[0]}-{seeds[-1]} ({len(seeds)} a task, in "
+                 f"{len(self.seed_ranges)} runs of {layouts}); successes / episodes per run, won / lost against "
                  f"{labels[0].split(' (')[0]} in the same mode on the same layouts:", "",
-                 "| model | mode | " + " | ".join(f"{a}-{a + layouts - 1}" for a in seed_ranges)
-                 + " | all | won / lost |", "|---|---|" + "---|" * (len(seed_ranges) + 2)]
-    for mode in ("global", "glsr"):
-        base = by[(labels[0], mode)]
-        for label in labels:
-            eps = by[(label, mode)]
-            per_run = [f"{sum(ok for (_, s), ok in eps.items() if a <= s < a + layouts)}/"
-                       f"{sum(a <= s < a + layouts for _, s in eps)}" for a in seed_ranges]
-            wl = "-" if label == labels[0] else won_lost_keyed(base, eps)
-            out_lines.append(f"| {label} | {mode} | " + " | ".join(per_run)
+                 "| model | mode | " + " | ".join(f"{a}-{a + layouts - 1}" for a in self.seed_ranges)
+                 + " | all | won / lost |", "|---|---|" + "---|" * (len(self.seed_ranges) + 2)]
+        for mode in ("global", "glsr"):
+            base = by[(labels[0], mode)]
+            for label in labels:
+                eps = by[(label, mode)]
+                per_run = [f"{sum(ok for (_, s), ok in eps.items() if a <= s < a + layouts)}/"
+                           f"{sum(a <= s < a + layouts for _, s in eps)}" for a in self.seed_ranges]
+                wl = "-" if label == labels[0] else won_lost_keyed(base, eps)
+                lines.append(f"| {label} | {mode} | " + " | ".join(per_run)
                              + f" | **{sum(eps.values())}/{len(eps)}** | {wl} |")
-    out_lines += ["", "Per task (all layouts):", ""] + per_task_table(
-        [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in ("global", "glsr") for label in labels])
-    return out_lines + command_lines(script, 2, ((name, cmd) for name, _, cmd in runs))
+        lines += ["", "Per task (all layouts):", ""] + per_task_table(
+            [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in ("global", "glsr") for label in labels])
+        return lines + command_lines(script, 2, ((name, cmd) for name, _, cmd in runs))
+
+    def main(self, doc: str, script_file: str, section: str, note: tuple[str, ...] = ()) -> None:
+        """:func:`main` of the script ``script_file``: its runs gathered into <its stem>.json beside it, ``note``'s
+        lines after the section's."""
+        script = Path(script_file)
+        out = script.with_suffix(".json")
+        main(doc, lambda: gather_suite(((name, cmd) for name, _, cmd in self.runs), out, self.suite),
+             lambda: self.lines(out, script.name) + list(note), section)
 
 
 def command_lines(script: str, workers: int | str, runs: Iterable[tuple[str, str]]) -> list[str]:

@@ -7,26 +7,15 @@ layouts (docs/seeds.md: seeds 20000+, never the shipped init states, never 90000
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "goal_corner.json"
-SECTION = "libero-goal-corner"
-SUITE = "libero_goal"
-SEED_RANGES = (20081, 20087)  # 6 layouts a task from each, the second run to confirm the first
-LAYOUTS = 6
-MODELS = (("v12", "four-suite v12 (shipped for libero_goal until stop 57)", dev_runs.FOUR_SUITE_MODEL),
-          ("corner", "libero_goal's own (v12 + 6 epochs on the suite)",
-           "--checkpoint runs/libero/planner_libero_goal_corner.safetensors"))
-RUNS = dev_runs.suite_model_runs("goal", SUITE, SEED_RANGES, LAYOUTS, MODELS)
-
-
-def gather() -> None:
-    dev_runs.gather_suite(((name, cmd) for name, _, cmd in RUNS), OUT, SUITE)
-
+COMPARISON = dev_runs.SuiteModelComparison(
+    prefix="goal", suite="libero_goal",
+    seed_ranges=(20081, 20087),  # 6 layouts a task from each, the second run to confirm the first
+    layouts=6,
+    models=(("v12", "four-suite v12 (shipped for libero_goal until stop 57)", dev_runs.FOUR_SUITE_MODEL),
+            ("corner", "libero_goal's own (v12 + 6 epochs on the suite)",
+             "--checkpoint runs/libero/planner_libero_goal_corner.safetensors")))
 
 if __name__ == "__main__":
-    dev_runs.main(__doc__, gather, lambda: dev_runs.suite_model_lines(OUT, RUNS, SUITE, SEED_RANGES, LAYOUTS,
-                                                                      "goal_corner.py"), SECTION)
+    COMPARISON.main(__doc__, __file__, "libero-goal-corner")

@@ -8,32 +8,20 @@ never the shipped init states, never 90000+), both at the same commit:
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import dev_runs  # this folder's: run as a script, the folder is on sys.path
 
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "l10_corner.json"
-SECTION = "libero-10-corner"
-SUITE = "libero_10"
-SEED_RANGES = (20093, 20101)  # fresh for libero_10 (docs/seeds.md), chosen before the run; the second to confirm
-LAYOUTS = 8
 # The model these runs judged against, the file shipped as libero_panda_libero_10 before stop 58 (the runs loaded it
-# from there): `git show 25cd9b9:tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors > <this path>`
+# from there)
 BEFORE = "runs/libero/libero10_before_stop58.safetensors"
-MODELS = (("shipped", "libero_10's model of the 50-demos lineage (shipped until stop 58)",
-           f"--checkpoint {BEFORE}"),
-          ("v12", "libero_10's own from v12 (97 points, 8 epochs on the suite)",
-           "--checkpoint runs/libero/planner_libero10_100_corner.safetensors"))
-RUNS = dev_runs.suite_model_runs("l10", SUITE, SEED_RANGES, LAYOUTS, MODELS)
-
-
-def gather() -> None:
-    dev_runs.gather_suite(((name, cmd) for name, _, cmd in RUNS), OUT, SUITE)
-
+COMPARISON = dev_runs.SuiteModelComparison(
+    prefix="l10", suite="libero_10",
+    seed_ranges=(20093, 20101),  # fresh for libero_10 (docs/seeds.md), chosen before the run; the second to confirm
+    layouts=8,
+    models=(("shipped", "libero_10's model of the 50-demos lineage (shipped until stop 58)", f"--checkpoint {BEFORE}"),
+            ("v12", "libero_10's own from v12 (97 points, 8 epochs on the suite)",
+             "--checkpoint runs/libero/planner_libero10_100_corner.safetensors")))
 
 if __name__ == "__main__":
-    dev_runs.main(__doc__, gather, lambda: dev_runs.suite_model_lines(OUT, RUNS, SUITE, SEED_RANGES, LAYOUTS,
-                                                                      "l10_corner.py")
-                  + ["", f"`{BEFORE}`: `git show 25cd9b9:tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors > "
-                     f"{BEFORE}` (the file the runs loaded, shipped until stop 58)."], SECTION)
+    COMPARISON.main(__doc__, __file__, "libero-10-corner", note=(
+        "", f"`{BEFORE}`: `git show 25cd9b9:tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors > {BEFORE}` "
+            "(the file the runs loaded, shipped until stop 58)."))
