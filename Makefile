@@ -121,7 +121,8 @@ libero-oracle-eval: setup
 #    continues a run from its last epoch (runs/libero/<run>.resume.pt), so `make libero-planner` again after a cut
 #    goes on where it stopped. It builds the four-suite default and, from it, libero_goal's own model
 #    (train_libero_goal_corner.yaml, 6 epochs on that suite's demonstrations, 19 min) and libero_10's
-#    (train_libero10_100_corner.yaml, widened to 97 global points, 8 epochs, 43 min); the direct baseline comes from
+#    (train_libero10_100_corner.yaml, widened to 97 global points, 8 epochs, 43 min, then train_libero10_100_more.yaml,
+#    6 epochs more, 31 min); the direct baseline comes from
 #    the 50-demo recipe (its file), run first; the shipped set is `make libero-planner LIBERO_PLANNER_EPISODES=50`
 #    and then `make libero-planner`;
 #  * 50: one run, train_libero50.yaml, then its fine-tune (the four-suite default before stop 54), libero_10's own
@@ -165,8 +166,10 @@ ifeq ($(LIBERO_PLANNER_EPISODES),100)
 	cp runs/libero/planner_libero_goal_corner.json tcot_hybrid/checkpoints/libero_panda_libero_goal.json
 	# libero_10's own model (stop 58): v12 widened to 97 global points, continued on that suite's demonstrations alone
 	$(call libero_train_resumable,train_libero10_100_corner,planner_libero10_100_corner,train_libero10_100_corner,)
-	cp runs/libero/planner_libero10_100_corner.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
-	cp runs/libero/planner_libero10_100_corner.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
+	# and six epochs more on the same demonstrations (stop 59: its held-out error was still falling)
+	$(call libero_train_resumable,train_libero10_100_more,planner_libero10_100_more,train_libero10_100_more,)
+	cp runs/libero/planner_libero10_100_more.safetensors tcot_hybrid/checkpoints/libero_panda_libero_10.safetensors
+	cp runs/libero/planner_libero10_100_more.json tcot_hybrid/checkpoints/libero_panda_libero_10.json
 	$(BIN)/python docs/libero-planner/heldout.py --radii 0 --data $(LIBERO_PLANNER_DATA) --out docs/libero-planner/heldout-100.json
 else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	$(BIN)/tcot train --config examples/configs/train_libero.yaml --overwrite > runs/libero/train.log 2>&1 \

@@ -326,23 +326,27 @@ def test_suite_models_continue_a_four_suite_model_on_their_suite_alone(suite, st
     assert own.data == v3.data  # the demonstrations collected through the release
 
 
-@pytest.mark.parametrize("suite, stem, window_change", [("libero_goal", "_goal_corner", {}),
-                                                         ("libero_10", "10_100_corner", {"L_g": 97})])
-def test_the_suites_corner_models_continue_the_shipped_four_suite_model_on_the_same_file(suite, stem, window_change):
+@pytest.mark.parametrize("suite, stems, window_change", [("libero_goal", ("_goal_corner",), {}),
+                                                          ("libero_10", ("10_100_corner", "10_100_more"), {"L_g": 97})])
+def test_the_suites_corner_models_continue_the_shipped_four_suite_model_on_the_same_file(suite, stems, window_change):
     """libero_goal's and libero_10's shipped models are v12 (the shipped four-suite checkpoint, train_libero100_corner's
     output) continued on their suite's demonstrations of v12's own file, with v12's network, labels and height
-    reference; libero_10's global window is widened to 97 points (its long tasks replay best from it)."""
+    reference; libero_10's global window is widened to 97 points (its long tasks replay best from it), and its run is
+    continued once more, each run starting from the one before (``stems`` in order; the last is shipped)."""
     root = Path(__file__).resolve().parent.parent
-    v12, own = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
-                for x in ("100_corner", stem))
-    assert own.suites == (suite,) and v12.suites == ()
-    assert own.init == "tcot_hybrid/checkpoints/libero_panda_default.safetensors" and own.data == v12.data
-    assert (own.model, own.height_ref) == (v12.model, v12.height_ref)
-    assert own.windows == dataclasses.replace(v12.windows, **window_change)
+    v12, *runs = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
+                  for x in ("100_corner", *stems))
+    assert v12.suites == () and runs[0].init == "tcot_hybrid/checkpoints/libero_panda_default.safetensors"
+    for before, run in zip([None, *runs], runs):
+        assert run.suites == (suite,) and run.data == v12.data
+        assert (run.model, run.height_ref) == (v12.model, v12.height_ref)
+        assert run.windows == dataclasses.replace(v12.windows, **window_change)
+        if before is not None:
+            assert run.init == before.out and run.out not in (before.out, before.init)
     shipped = {stem: json.loads((root / "tcot_hybrid" / "checkpoints" / f"libero_panda_{stem}.json").read_text())
                for stem in ("default", suite)}
     assert shipped["default"]["train_config"]["out"] == v12.out
-    assert shipped[suite]["train_config"]["out"] == own.out
+    assert shipped[suite]["train_config"]["out"] == runs[-1].out
     assert shipped[suite]["vocabulary"] == shipped["default"]["vocabulary"]  # reads every suite's words
 
 
