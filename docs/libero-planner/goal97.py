@@ -1,7 +1,7 @@
 """libero_goal's own model with the 97-point global window (examples/configs/train_libero_goal97_corner.yaml: v12
 widened to 97 global points and trained 8 epochs on the suite, libero_10's recipe) against the goal model shipped
-since stop 57 (51 points) and against the four-suite v12 it was continued from, on sampled development layouts (docs/seeds.md: seeds 20000+, never the shipped init
-states, never 90000+), both at the same commit:
+since stop 57 (51 points) and against the four-suite v12 it was continued from, on sampled development layouts
+(docs/seeds.md: seeds 20000+, never the shipped init states, never 90000+), all three at the same commit:
 
     .venv/bin/python docs/libero-planner/goal97.py --gather   # runs/dev/* -> goal97.json
     .venv/bin/python docs/libero-planner/goal97.py            # goal97.json -> docs/libero-planner.md
