@@ -185,6 +185,7 @@ class Simulation:
         """RGB (or depth [m]) image; ``markers`` = [(points (N,3) [m], rgba)] drawn as small spheres in
         the scene (e.g. a lifted 3D path) — for videos only, never for planner images."""
         r = self.renderer(width, height)
+        self.task.show_state()
         if self.render_option is None:
             r.update_scene(self.data, camera=camera)
         else:

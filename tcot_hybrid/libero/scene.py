@@ -245,6 +245,14 @@ class LiberoScene:
         self.data.qvel[:] = state[1 + m.nq:]
         mujoco.mj_forward(m, self.data)
 
+    def show_state(self) -> None:
+        """The visuals as LIBERO's own step and reset leave them, for the frame about to be rendered: robosuite's
+        debugging sites (the gripper's aiming line and frames) hidden, as its reset hides them (a scene set
+        straight to a shipped init state was never reset, and showed them where the training layouts do not),
+        and the sites LIBERO updates after every step from the state (a stove's burner red while it is on)."""
+        self.env.visualize(vis_settings={name: False for name in self.env._visualizations})
+        self.env._post_process()
+
     def goal_reached(self) -> bool:
         """LIBERO's own goal check (the conjunction of the task file's goal predicates), on the current state."""
         return bool(self.env._check_success())

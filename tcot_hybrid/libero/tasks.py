@@ -165,6 +165,10 @@ class LiberoTask(Task):
         lo, hi = xy.min(axis=0) - RELOCATION_MARGIN_M, xy.max(axis=0) + RELOCATION_MARGIN_M
         return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
+    def show_state(self) -> None:
+        if self.scene is not None:
+            self.scene.show_state()
+
     def release_scene(self) -> None:
         if self.scene is not None:
             self.scene.release()

@@ -331,6 +331,10 @@ class Task(ABC):
     def release_scene(self) -> None:
         """The simulation built from ``build_scene`` is closed (a LIBERO task keeps its scene for reuse)."""
 
+    def show_state(self) -> None:
+        """Bring the scene's state-dependent visuals up to date before a frame is rendered (a LIBERO stove's
+        burner glows while its knob is on). Default: the workcell's scenes have none."""
+
     def set_episode(self, *, seed: int, init: str | None) -> None:
         """Choose how ``reset`` lays the scene out for the episode ``seed``: ``init`` is one of ``init_modes``
         (None: the first). Workcell tasks always sample a fresh layout from the seed."""

@@ -240,3 +240,42 @@ def test_the_next_episode_of_a_task_reuses_the_scenes_renderer_and_sees_the_same
             fresh.close()
     finally:
         sim.close()
+
+
+def test_frames_show_the_state_as_libero_does_whatever_the_scene_did_before():
+    """A scene set straight to a shipped init state was never reset by robosuite, and its frames showed the
+    gripper's debugging sites (a green aiming line) that no training layout shows; and a stove's burner, which
+    LIBERO lights after every step while the knob is on, kept whatever it showed last. Each frame now shows the
+    state: the same shipped state renders the same before and after a sampled layout, and the burner lights."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.run_config import RunConfig
+
+    runner = EpisodeRunner(RunConfig(task="libero_goal:turn_on_the_stove", seed=0, init="shipped"))
+    task, sim = runner.stack.task, runner.stack.sim
+    m, d = sim.model, sim.data
+
+    def shown_sites() -> set[str]:
+        return {m.site(i).name for i in range(m.nsite) if m.site_rgba[i][3] > 0 and m.site_group[i] < 3}
+
+    def red_pixels(img) -> int:
+        r, g, b = (img[..., c].astype(int) for c in range(3))
+        return int(((r > 150) & (g < 90) & (b < 90)).sum())
+
+    try:
+        sim.reset(np.random.default_rng(0))  # the scene's first episode: straight from its build to a shipped state
+        first = sim.render("agentview", 128, 128)
+        assert shown_sites() == set()
+        knob = m.joint("flat_stove_1_button")
+        d.qpos[knob.qposadr[0]] = 1.0  # on: LIBERO's turnon range starts at 0.5 rad
+        mujoco.mj_forward(m, d)
+        lit = sim.render("agentview", 128, 128)
+        assert shown_sites() == {"flat_stove_1_burner"}
+        assert red_pixels(lit) > red_pixels(first) + 20
+        task.set_episode(seed=21, init="sampled")
+        sim.reset(np.random.default_rng(21))
+        sim.render("agentview", 128, 128)
+        task.set_episode(seed=0, init="shipped")
+        sim.reset(np.random.default_rng(0))
+        np.testing.assert_array_equal(sim.render("agentview", 128, 128), first)
+    finally:
+        sim.close()
