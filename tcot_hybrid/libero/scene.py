@@ -177,6 +177,9 @@ class LiberoScene:
         model, data = env.sim.model._model, env.sim.data._data
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
+        # robosuite's reset hides its debugging sites (the gripper's aiming line and frames); its constructor leaves
+        # them shown, and a scene set straight to a shipped init state is never reset: hide them once here
+        env.visualize(vis_settings={name: False for name in env._visualizations})
         scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
         scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
         return scene
@@ -246,11 +249,8 @@ class LiberoScene:
         mujoco.mj_forward(m, self.data)
 
     def show_state(self) -> None:
-        """The visuals as LIBERO's own step and reset leave them, for the frame about to be rendered: robosuite's
-        debugging sites (the gripper's aiming line and frames) hidden, as its reset hides them (a scene set
-        straight to a shipped init state was never reset, and showed them where the training layouts do not),
-        and the sites LIBERO updates after every step from the state (a stove's burner red while it is on)."""
-        self.env.visualize(vis_settings={name: False for name in self.env._visualizations})
+        """The sites LIBERO updates from the state after every step (a stove's burner red while it is on), for the
+        frame about to be rendered (robosuite's debugging sites are hidden once, at build)."""
         self.env._post_process()
 
     def goal_reached(self) -> bool:
