@@ -190,19 +190,21 @@ def changed_tasks(rows: list[dict], mode: str, base: str, run: str, per_task: in
 class SuiteModelComparison:
     """A suite's own model judged against another on sampled development layouts, global-only and GLSR: each of
     ``models`` ((short name, label, `--checkpoint` flag); the first is the baseline) on ``layouts`` layouts a task
-    from each first seed of ``seed_ranges``, into runs/dev/<prefix>_<short>[b...]."""
+    from each first seed of ``seed_ranges``, into runs/dev/<prefix>_<short>[b...]. ``modes``: GLSR alone for models
+    whose plans are bit-identical (a detector trained alone), where global-only cannot differ."""
 
     prefix: str
     suite: str
     seed_ranges: tuple[int, ...]
     layouts: int
     models: tuple[tuple[str, str, str], ...]
+    modes: tuple[str, ...] = ("global", "glsr")
 
     @property
     def runs(self) -> tuple[tuple[str, str, str], ...]:
         """(run directory under runs/dev, model label, command) of every run."""
         cmd = (f"tcot eval --suite {self.suite} --planners learned --init sampled --episodes {self.layouts} "
-               "--modes global,glsr")
+               f"--modes {','.join(self.modes)}")
         return tuple((f"{self.prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
                      for short, label, flag in self.models for k, first in enumerate(self.seed_ranges))
 
@@ -221,7 +223,7 @@ class SuiteModelComparison:
                  f"{labels[0].split(' (')[0]} in the same mode on the same layouts:", "",
                  "| model | mode | " + " | ".join(f"{a}-{a + layouts - 1}" for a in self.seed_ranges)
                  + " | all | won / lost |", "|---|---|" + "---|" * (len(self.seed_ranges) + 2)]
-        for mode in ("global", "glsr"):
+        for mode in self.modes:
             base = by[(labels[0], mode)]
             for label in labels:
                 eps = by[(label, mode)]
@@ -231,7 +233,7 @@ class SuiteModelComparison:
                 lines.append(f"| {label} | {mode} | " + " | ".join(per_run)
                              + f" | **{sum(eps.values())}/{len(eps)}** | {wl} |")
         lines += ["", "Per task (all layouts):", ""] + per_task_table(
-            [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in ("global", "glsr") for label in labels])
+            [(f"{label.split(' (')[0]}, {mode}", by[(label, mode)]) for mode in self.modes for label in labels])
         return lines + command_lines(script, 2, ((name, cmd) for name, _, cmd in runs))
 
     def main(self, doc: str, script_file: str, section: str, note: tuple[str, ...] = ()) -> None:
