@@ -161,6 +161,7 @@ def cmd_run(argv: list[str]) -> int:
         raise TcotError("--viewer needs a display (DISPLAY/WAYLAND_DISPLAY is not set); "
                         "use --video out.mp4 to record the episode instead")
     from tcot_hybrid.jsonio import check_output_dir, check_output_file
+    from tcot_hybrid.video import check_timeline_path
 
     check_output_dir(cmd.out)  # an unusable --out, --video or --timeline is found now, not after the episode
     if (cmd.out / "episode.json").is_dir():
@@ -170,6 +171,8 @@ def cmd_run(argv: list[str]) -> int:
     for flag, path in (("--video", cmd.video), ("--timeline", cmd.timeline)):
         if path is not None:
             check_output_file(path, what=flag)
+    if cmd.timeline is not None:
+        check_timeline_path(cmd.timeline)
     from tcot_hybrid.planners import check_checkpoint_used
 
     check_checkpoint_used(cmd.cfg.checkpoint, [cmd.cfg.planner])

@@ -78,6 +78,21 @@ class EpisodeVideo:
         self.writer.close()
 
 
+def check_timeline_path(path: str | Path, *, what: str = "--timeline") -> None:
+    """Refuse a timeline path whose suffix matplotlib cannot draw to, before the episode runs: ``savefig`` would only
+    fail once the episode is over. Raises OutputError naming the formats it can write."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from tcot_hybrid.errors import OutputError
+
+    formats = sorted(FigureCanvasBase.get_supported_filetypes())
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in formats:
+        got = f"'.{suffix}'" if suffix else "no suffix"
+        raise OutputError(f"{what} {str(path)!r} has {got}; a timeline is an image: end it in one of "
+                          f"{', '.join('.' + f for f in formats)} (e.g. timeline.png)")
+
+
 class Timeline:
     """Records per planner step what the timeline plot shows; ``save(png)`` draws it."""
 

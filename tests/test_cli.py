@@ -65,6 +65,17 @@ def test_bad_input_exits_nonzero_and_names_valid_choices(args, fragment, tmp_pat
     assert fragment in r.stderr + r.stdout
 
 
+def test_run_refuses_a_timeline_it_cannot_draw_before_the_episode(tmp_path):
+    """matplotlib would fail on the suffix only after the episode; the run is refused first, naming the formats."""
+    r = tcot("run", "--task", "goal_open_drawer", "--timeline", str(tmp_path / "timeline.txt"), "--out", str(tmp_path))
+    assert r.returncode != 0
+    assert "'.txt'" in r.stderr and ".png" in r.stderr and ".svg" in r.stderr
+    assert not (tmp_path / "episode.json").exists() and not (tmp_path / "timeline.txt").exists()
+    r = tcot("run", "--task", "goal_open_drawer", "--timeline", str(tmp_path / "timeline.png"), "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "timeline.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_malformed_config_file_refused(tmp_path):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text("timing:\n  ctrl_dt: fast\n")
