@@ -326,13 +326,14 @@ def test_suite_models_continue_a_four_suite_model_on_their_suite_alone(suite, st
     assert own.data == v3.data  # the demonstrations collected through the release
 
 
-@pytest.mark.parametrize("suite, stems, window_change", [("libero_goal", ("_goal_corner",), {}),
+@pytest.mark.parametrize("suite, stems, window_change", [("libero_goal", ("_goal_corner", "_goal_stove_lit"), {}),
                                                           ("libero_10", ("10_100_corner", "10_100_more"), {"L_g": 97})])
 def test_the_suites_corner_models_continue_the_shipped_four_suite_model_on_the_same_file(suite, stems, window_change):
     """libero_goal's and libero_10's shipped models are v12 (the shipped four-suite checkpoint, train_libero100_corner's
     output) continued on their suite's demonstrations of v12's own file, with v12's network, labels and height
-    reference; libero_10's global window is widened to 97 points (its long tasks replay best from it), and its run is
-    continued once more, each run starting from the one before (``stems`` in order; the last is shipped)."""
+    reference; libero_10's global window is widened to 97 points (its long tasks replay best from it); each suite's run
+    is continued once more (libero_goal's with its stove knob's demonstrations recollected with the burner lit in
+    place of the old ones), each run starting from the one before (``stems`` in order; the last is shipped)."""
     root = Path(__file__).resolve().parent.parent
     v12, *runs = (load_train_config(root / "examples" / "configs" / f"train_libero{x}.yaml")
                   for x in ("100_corner", *stems))
