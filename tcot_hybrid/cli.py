@@ -138,7 +138,8 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
             "steps": 0, "plans": 0, "perturb": cfg.perturb.name, "events": [], "config": cfg.to_dict(),
             "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
             "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint,
-                                                                  suite=make_task(cfg.task).suite)),
+                                                                  suite=make_task(cfg.task).suite,
+                                                                  task=make_task(cfg.task).name)),
             "versions": run_environment()}
 
 

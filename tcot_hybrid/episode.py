@@ -106,7 +106,7 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name, robot=robot,
                          world_kind=task.world_kind, T_world_base=sim.T_world_base,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint,
-                                  "suite": task.suite})
+                                  "suite": task.suite, "task": task.name})
     # planner_factory (e.g. label replay) is not privileged: it sees what a learned planner sees
     planner = make_planner(cfg.planner, ctx) if planner_factory is None else planner_factory(ctx.observation_only())
     return Stack(cfg=cfg, robot=robot, task=task, sim=sim, camera=camera, executor=executor, planner=planner)

@@ -344,6 +344,32 @@ def test_a_suite_with_its_own_shipped_model_gets_it_and_the_others_the_default(t
     assert planner_checkpoint("oracle", "libero_panda", None, suite="libero_10") is None
 
 
+def test_a_task_routed_to_another_shipped_model_gets_it_and_a_route_to_nothing_is_refused(tmp_path, monkeypatch):
+    """task_models.json routes a task to a shipped model other than its suite's (trajectory planners only): that task
+    loads it, its suite's other tasks keep the suite's model, --checkpoint still wins; a route to a checkpoint that
+    is not shipped is refused naming the task and the shipped ones."""
+    import tcot_hybrid.learning.checkpoint as ck
+    from tcot_hybrid.planners import planner_checkpoint
+
+    monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
+    for stem in ("libero_panda_default", "libero_panda_libero_10", "libero_panda_direct_default"):
+        (tmp_path / f"{stem}.safetensors").write_bytes(b"")
+    routed = "libero_10:KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it"
+    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {routed: "libero_panda_default"}}}))
+    assert default_checkpoint("libero_panda", suite="libero_10", task=routed).name == "libero_panda_default.safetensors"
+    assert default_checkpoint("libero_panda", suite="libero_10", task="libero_10:other").name == \
+        "libero_panda_libero_10.safetensors"
+    assert default_checkpoint("libero_panda", "direct", suite="libero_10", task=routed).name == \
+        "libero_panda_direct_default.safetensors"
+    assert planner_checkpoint("learned", "libero_panda", None, suite="libero_10", task=routed).name == \
+        "libero_panda_default.safetensors"
+    assert planner_checkpoint("learned", "libero_panda", tmp_path / "mine.safetensors", suite="libero_10",
+                              task=routed) == tmp_path / "mine.safetensors"
+    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {routed: "libero_panda_v99"}}}))
+    with pytest.raises(CheckpointError, match="KITCHEN_SCENE3.*'libero_panda_v99'.*not shipped.*libero_panda_default"):
+        default_checkpoint("libero_panda", suite="libero_10", task=routed)
+
+
 def suite_models() -> list:
     """The shipped LIBERO suite models (``libero_panda_<suite>``; not the defaults, not a direct planner's)."""
     from tcot_hybrid.learning.checkpoint import checkpoints_dir

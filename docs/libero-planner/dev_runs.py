@@ -191,7 +191,8 @@ class SuiteModelComparison:
     """A suite's own model judged against another on sampled development layouts, global-only and GLSR: each of
     ``models`` ((short name, label, `--checkpoint` flag); the first is the baseline) on ``layouts`` layouts a task
     from each first seed of ``seed_ranges``, into runs/dev/<prefix>_<short>[b...]. ``modes``: GLSR alone for models
-    whose plans are bit-identical (a detector trained alone), where global-only cannot differ."""
+    whose plans are bit-identical (a detector trained alone), where global-only cannot differ. ``tasks``: those of
+    the suite's tasks alone (all of them when empty)."""
 
     prefix: str
     suite: str
@@ -199,11 +200,14 @@ class SuiteModelComparison:
     layouts: int
     models: tuple[tuple[str, str, str], ...]
     modes: tuple[str, ...] = ("global", "glsr")
+    tasks: tuple[str, ...] = ()
+    layouts_kind: str = "development"  # what the layouts are for (docs/seeds.md), as the docs section names them
 
     @property
     def runs(self) -> tuple[tuple[str, str, str], ...]:
         """(run directory under runs/dev, model label, command) of every run."""
-        cmd = (f"tcot eval --suite {self.suite} --planners learned --init sampled --episodes {self.layouts} "
+        which = f"--tasks {','.join(self.tasks)}" if self.tasks else f"--suite {self.suite}"
+        cmd = (f"tcot eval {which} --planners learned --init sampled --episodes {self.layouts} "
                f"--modes {','.join(self.modes)}")
         return tuple((f"{self.prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
                      for short, label, flag in self.models for k, first in enumerate(self.seed_ranges))
@@ -218,7 +222,7 @@ class SuiteModelComparison:
             by[(label, r["mode"])][(r["task"], r["seed"])] = r["success"]
         labels = [label for _, label, _ in self.models]
         seeds = sorted({s for eps in by.values() for _, s in eps})
-        lines = [f"{self.suite} on sampled development layouts {seeds[0]}-{seeds[-1]} ({len(seeds)} a task, in "
+        lines = [f"{self.suite} on sampled {self.layouts_kind} layouts {seeds[0]}-{seeds[-1]} ({len(seeds)} a task, in "
                  f"{len(self.seed_ranges)} runs of {layouts}); successes / episodes per run, won / lost against "
                  f"{labels[0].split(' (')[0]} in the same mode on the same layouts:", "",
                  "| model | mode | " + " | ".join(f"{a}-{a + layouts - 1}" for a in self.seed_ranges)

@@ -43,8 +43,8 @@ SUITE_EVAL = HERE / "eval-protocol-suite"
 SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; `libero_panda_<suite>`, where shipped)"
 # what `tcot eval` runs without --checkpoint: the suite-model row's episodes where a suite has its own model, the
 # four-suite GLSR row's elsewhere
-DEFAULTS_ROW = ("GLSR at the stack's defaults (no `--checkpoint`: a suite's own model where one is shipped, the "
-                "four-suite model elsewhere)")
+DEFAULTS_ROW = ("GLSR at the stack's defaults (no `--checkpoint`: the model a task is routed to, else its suite's own "
+                "model where one is shipped, else the four-suite model)")
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
@@ -304,6 +304,28 @@ def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     return ", ".join(parts) or None
 
 
+def defaults_episodes(glsr: list[dict], suite_eps: list[dict]) -> list[dict]:
+    """The defaults row: each task's episodes from the row of the model `tcot eval` loads for it without
+    --checkpoint (tcot_hybrid.learning.checkpoint.default_checkpoint: a task routed in task_models.json, else its
+    suite's own model, else the four-suite one): the suite-model row's or the four-suite GLSR row's; a task whose
+    model neither row ran is left out (the row's n says so)."""
+    from tcot_hybrid.learning.checkpoint import default_checkpoint
+
+    out = []
+    for task in sorted({e["task"] for e in glsr + suite_eps}):
+        suite = task.split(":")[0]
+        stem = default_checkpoint("libero_panda", suite=suite, task=task).stem
+        src = glsr if stem == "libero_panda_default" else suite_eps if stem == f"libero_panda_{suite}" else []
+        out += [e for e in src if e["task"] == task]
+    return out
+
+
+def routed_tasks() -> dict[str, str]:
+    from tcot_hybrid.learning.checkpoint import task_models
+
+    return task_models("libero_panda")
+
+
 def table1_lines(by, suite_eps: list[dict]) -> list[str]:
     lines = ["**Table 1 form: success on the shipped init states** (`make libero-protocol`, "
              "`docs/libero-planner/eval-protocol/`; ours: success [Wilson 95 % interval] n; the paper's: mean of 500 "
@@ -330,8 +352,7 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
                      + f" | {_average(got)} |")
         glsr = by.get(("learned", "glsr"))
         if glsr:
-            own = {e["suite"] for e in suite_eps}
-            got = _suite_counts(suite_eps + [e for e in glsr if e["suite"] not in own])
+            got = _suite_counts(defaults_episodes(glsr, suite_eps))
             lines.append(f"| ours: {DEFAULTS_ROW} | " + " | ".join(rate(*got[s]) for s in SUITES)
                          + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
@@ -377,8 +398,11 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
     glsr = by.get(("learned", "glsr"))
     if suite_eps and glsr:  # the defaults row borrows the four-suite GLSR row's episodes where no own model ran
         own = sorted({e["suite"] for e in suite_eps})
+        routes = routed_tasks()
+        routed = "".join(f"; {t.split(':', 1)[1]} ({t.split(':')[0]}) from the row of `{stem}`, the model it is "
+                         "routed to (tcot_hybrid/checkpoints/task_models.json)" for t, stem in sorted(routes.items()))
         lines.append(f"- {DEFAULTS_ROW.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other suites "
-                     f"from the four-suite GLSR row ({_checkpoint_note(glsr, 'libero_panda_default')}).")
+                     f"from the four-suite GLSR row ({_checkpoint_note(glsr, 'libero_panda_default')}){routed}.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():

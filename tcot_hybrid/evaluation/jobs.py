@@ -59,7 +59,8 @@ def checkpoint_digest(cfg: RunConfig) -> str | None:
     from tcot_hybrid.tasks import make_task
 
     try:
-        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint, suite=make_task(cfg.task).suite)
+        task = make_task(cfg.task)
+        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint, suite=task.suite, task=task.name)
     except TcotError:
         return None
     if path is None or not path.is_file():

@@ -434,12 +434,36 @@ def checkpoints_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "checkpoints"
 
 
-def default_checkpoint(robot: str, kind: str = "trajectory", *, suite: str | None = None,
+TASK_MODELS_FILE = "task_models.json"
+
+
+def task_models(robot: str) -> dict[str, str]:
+    """Tasks whose shipped trajectory planner is not their suite's: {task: checkpoint stem}, from
+    ``checkpoints/task_models.json`` (each choice made on development layouts by the rule docs/libero-planner.md
+    states in "A model per task"). A route to a checkpoint that is not shipped is refused, naming the shipped ones."""
+    path = checkpoints_dir() / TASK_MODELS_FILE
+    if not path.is_file():
+        return {}
+    routes = json.loads(path.read_text()).get("routes", {}).get(robot, {})
+    for task, stem in routes.items():
+        if not (checkpoints_dir() / f"{stem}{SUFFIX}").is_file():
+            have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}"))
+            raise CheckpointError(f"{path.name}: task {task!r} of robot {robot!r} is routed to {stem!r}, which is "
+                                  f"not shipped; shipped: {', '.join(have) or 'none'}")
+    return routes
+
+
+def default_checkpoint(robot: str, kind: str = "trajectory", *, suite: str | None = None, task: str | None = None,
                        robot_ref: str | None = None) -> Path:
-    """The shipped checkpoint for ``robot`` on a task of ``suite``: the suite's own model if one is shipped
+    """The shipped checkpoint for ``robot`` on ``task`` of ``suite``: the model ``task_models.json`` routes the task
+    to (trajectory planners only; :func:`task_models`), else the suite's own model if one is shipped
     (``<robot>_<suite>`` / ``<robot>_direct_<suite>``: the paper's TCoT row trains one model per LIBERO suite),
     else the robot's model for all suites (``<robot>_default`` / ``<robot>_direct_default``, its TCoT-Multi row)."""
     prefix = robot if kind == "trajectory" else f"{robot}_{kind}"
+    if task and kind == "trajectory":
+        stem = task_models(robot).get(task)
+        if stem:
+            return checkpoints_dir() / f"{stem}{SUFFIX}"
     if suite:
         own = checkpoints_dir() / f"{prefix}_{suite}{SUFFIX}"
         if own.is_file():

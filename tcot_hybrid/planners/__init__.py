@@ -108,24 +108,26 @@ def check_checkpoint_used(checkpoint: str | Path | None, planners: list[str]) ->
 
 
 def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None, *, suite: str | None = None,
-                       robot_ref: str | None = None) -> Path | None:
+                       task: str | None = None, robot_ref: str | None = None) -> Path | None:
     """The checkpoint file planner ``name`` loads: ``checkpoint`` if given, else the robot's shipped default for
-    a task of ``suite`` (that suite's own model if one is shipped; ``CheckpointError`` naming the shipped ones if
-    there is none); None for planners without a network. ``robot_ref`` is how the user names the robot (a path
-    for one of their own), for the error's advice."""
+    ``task`` of ``suite`` (a model routed to that task, else that suite's own model if one is shipped;
+    ``CheckpointError`` naming the shipped ones if there is none); None for planners without a network.
+    ``robot_ref`` is how the user names the robot (a path for one of their own), for the error's advice."""
     kind = CHECKPOINT_KINDS.get(name)
     if kind is None:
         return None
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 
-    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind, suite=suite, robot_ref=robot_ref)
+    return Path(checkpoint) if checkpoint else default_checkpoint(robot, kind, suite=suite, task=task,
+                                                                  robot_ref=robot_ref)
 
 
 def context_checkpoint(name: str, ctx: ObservationContext) -> Path | None:
-    """:func:`planner_checkpoint` for a planner built from ``ctx`` (its options' checkpoint and task suite)."""
+    """:func:`planner_checkpoint` for a planner built from ``ctx`` (its options' checkpoint, task and suite)."""
     from tcot_hybrid.robot import robot_ref
 
     return planner_checkpoint(name, ctx.robot_name, ctx.options.get("checkpoint"), suite=ctx.options.get("suite"),
+                              task=ctx.options.get("task"),
                               robot_ref=robot_ref(ctx.robot) if ctx.robot is not None else None)
 
 

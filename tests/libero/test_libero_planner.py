@@ -12,7 +12,7 @@ pytest.importorskip("libero.libero")  # tests/libero is itself a namespace "libe
 from tcot_hybrid.data.dataset import open_demos  # noqa: E402
 from tcot_hybrid.episode import EpisodeRunner  # noqa: E402
 from tcot_hybrid.errors import CheckpointError  # noqa: E402
-from tcot_hybrid.learning.checkpoint import load_checkpoint, meta_path  # noqa: E402
+from tcot_hybrid.learning.checkpoint import checkpoints_dir, load_checkpoint, meta_path, task_models  # noqa: E402
 from tcot_hybrid.learning.model import ModelConfig  # noqa: E402
 from tcot_hybrid.learning.train import train  # noqa: E402
 from tcot_hybrid.learning.train_config import TrainConfig  # noqa: E402
@@ -90,11 +90,16 @@ def test_one_glsr_episode_with_the_tiny_planner(tiny_checkpoint):
 LONG_TASK = "libero_10:LIVING_ROOM_SCENE2_put_both_the_alphabet_soup_and_the_tomato_sauce_in_the_basket"
 
 
+STOVE_TASK = "libero_10:KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it"
+
+
 @pytest.mark.parametrize("task, stem", [(LONG_TASK, "libero_panda_libero_10"), (SPATIAL_TASK, "libero_panda_default"),
-                                        ("libero_goal:turn_on_the_stove", "libero_panda_libero_goal")])
+                                        ("libero_goal:turn_on_the_stove", "libero_panda_libero_goal"),
+                                        (STOVE_TASK, "libero_panda_default")])
 def test_learned_planner_loads_its_suites_own_shipped_model(task, stem):
     """Without --checkpoint, a libero_10 or libero_goal task's learned planner is its suite's own model (the paper's
-    TCoT row), a spatial task's the four-suite one; the resume key's checkpoint hash is that of the file loaded."""
+    TCoT row), a spatial task's the four-suite one, and libero_10's stove task the four-suite one it is routed to
+    (task_models.json); the resume key's checkpoint hash is that of the file loaded."""
     from tcot_hybrid.evaluation.jobs import checkpoint_digest
 
     cfg = RunConfig(task=task, seed=0, init="shipped", planner="learned")
@@ -108,3 +113,14 @@ def test_learned_planner_loads_its_suites_own_shipped_model(task, stem):
     assert checkpoint_digest(cfg) != checkpoint_digest(dataclasses.replace(cfg, checkpoint=str(
         loaded.with_name(other + loaded.suffix))))
     assert checkpoint_digest(cfg) == checkpoint_digest(dataclasses.replace(cfg, checkpoint=str(loaded)))
+
+
+def test_every_shipped_task_route_names_a_task_and_a_shipped_model_trained_on_its_suite():
+    """The shipped task_models.json: every routed task is one the registry knows, its model is shipped (task_models
+    refuses otherwise) and was trained on the task's suite among others."""
+    from tcot_hybrid.tasks import make_task
+
+    for task, stem in task_models("libero_panda").items():
+        suite = make_task(task).suite
+        suites = json.loads(meta_path(checkpoints_dir() / f"{stem}.safetensors").read_text())["train_config"]["suites"]
+        assert not suites or suite in suites, (task, stem, suites)  # []: every suite of its demonstrations
