@@ -269,13 +269,15 @@ libero-protocol: setup
 	$(call libero_protocol_row,direct,global,2)
 	$(BIN)/python docs/libero-planner/protocol.py
 
-# One model per suite (the paper's TCoT row): GLSR on each suite that ships its own model
+# One model per suite (the paper's TCoT row): GLSR and global-only on each suite that ships its own model
 # (tcot_hybrid/checkpoints/libero_panda_<suite>.safetensors, which that suite's tasks load by default), one folder
 # per suite under $(PROTOCOL_SUITE)
 PROTOCOL_SUITE := docs/libero-planner/eval-protocol-suite
 SUITE_MODELS := $(patsubst tcot_hybrid/checkpoints/libero_panda_%.safetensors,%,$(SUITE_MODEL_FILES))
 define suite_protocol_row
 $(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_SUITE)/$(1),$(1),\
+	--checkpoint tcot_hybrid/checkpoints/libero_panda_$(1).safetensors)
+$(call libero_protocol_row,learned,global,50,$(PROTOCOL_SUITE)/$(1),$(1),\
 	--checkpoint tcot_hybrid/checkpoints/libero_panda_$(1).safetensors)
 
 endef

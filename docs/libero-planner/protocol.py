@@ -41,10 +41,14 @@ EVAL = HERE / "eval-protocol"
 # each suite's own shipped model, one folder per suite (Makefile libero-protocol-suite)
 SUITE_EVAL = HERE / "eval-protocol-suite"
 SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; `libero_panda_<suite>`, where shipped)"
+SUITE_GLOBAL_ROW = "global trajectory only, each suite's own model (`libero_panda_<suite>`, where shipped)"
 # what `tcot eval` runs without --checkpoint: the suite-model row's episodes where a suite has its own model, the
 # four-suite GLSR row's elsewhere
 DEFAULTS_ROW = ("GLSR at the stack's defaults (no `--checkpoint`: the model a task is routed to, else its suite's own "
                 "model where one is shipped, else the four-suite model)")
+DEFAULTS_GLOBAL_ROW = "global trajectory only at the stack's defaults (the same models)"
+# the suite-model folders' rows, (mode, label) in table order
+SUITE_MODES = (("global", SUITE_GLOBAL_ROW, DEFAULTS_GLOBAL_ROW), ("glsr", SUITE_ROW, DEFAULTS_ROW))
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
 PER_SUITE = 500  # 10 tasks x 50 shipped init states
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
@@ -224,11 +228,11 @@ def _suite_model_folders() -> list[Path]:
 
 
 def _suite_model_records() -> list[dict]:
-    """GLSR episodes of the suite-model row: each suite's folder holds that suite's tasks run with its own model
-    (one checkpoint per folder, as in :func:`_rows`)."""
+    """Global-only and GLSR episodes of the suite-model rows: each suite's folder holds that suite's tasks run with
+    its own model (one checkpoint per folder, as in :func:`_rows`)."""
     out = []
     for folder in _suite_model_folders():
-        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] == "glsr"]
+        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] in ("glsr", "global")]
         strays = sorted({e["suite"] for e in eps} - {folder.name})
         hashes = sorted({e["checkpoint_hash"] for e in eps})
         if strays or len(hashes) > 1:
@@ -304,18 +308,18 @@ def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     return ", ".join(parts) or None
 
 
-def defaults_episodes(glsr: list[dict], suite_eps: list[dict]) -> list[dict]:
-    """The defaults row: each task's episodes from the row of the model `tcot eval` loads for it without
+def defaults_episodes(multi: list[dict], suite_eps: list[dict]) -> list[dict]:
+    """A defaults row of one mode: each task's episodes from the row of the model `tcot eval` loads for it without
     --checkpoint (tcot_hybrid.learning.checkpoint.default_checkpoint: a task routed in task_models.json, else its
-    suite's own model, else the four-suite one): the suite-model row's or the four-suite GLSR row's; a task whose
-    model neither row ran is left out (the row's n says so)."""
+    suite's own model, else the four-suite one): the suite-model row's (``suite_eps``) or the four-suite row's
+    (``multi``); a task whose model neither row ran is left out (the row's n says so)."""
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 
     out = []
-    for task in sorted({e["task"] for e in glsr + suite_eps}):
+    for task in sorted({e["task"] for e in multi + suite_eps}):
         suite = task.split(":")[0]
         stem = default_checkpoint("libero_panda", suite=suite, task=task).stem
-        src = glsr if stem == "libero_panda_default" else suite_eps if stem == f"libero_panda_{suite}" else []
+        src = multi if stem == "libero_panda_default" else suite_eps if stem == f"libero_panda_{suite}" else []
         out += [e for e in src if e["task"] == task]
     return out
 
@@ -346,14 +350,18 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
             partial += f" (init states 0-{planned // 10 - 1} of each task)"
         lines.append(f"| ours: {label}{partial} | "
                      + " | ".join(rate(*got[s]) for s in SUITES) + f" | {_average(got)} |")
-    if suite_eps:
-        got = _suite_counts(suite_eps)
-        lines.append(f"| ours: {SUITE_ROW} | " + " | ".join(rate(*got[s]) if got[s][1] else "-" for s in SUITES)
+    defaults = {}
+    for mode, label, defaults_label in SUITE_MODES:
+        own = [e for e in suite_eps if e["mode"] == mode]
+        if not own:
+            continue
+        got = _suite_counts(own)
+        lines.append(f"| ours: {label} | " + " | ".join(rate(*got[s]) if got[s][1] else "-" for s in SUITES)
                      + f" | {_average(got)} |")
-        glsr = by.get(("learned", "glsr"))
-        if glsr:
-            got = _suite_counts(defaults_episodes(glsr, suite_eps))
-            lines.append(f"| ours: {DEFAULTS_ROW} | " + " | ".join(rate(*got[s]) for s in SUITES)
+        multi = by.get(("learned", mode))
+        if multi:
+            defaults[mode] = got = _suite_counts(defaults_episodes(multi, own))
+            lines.append(f"| ours: {defaults_label} | " + " | ".join(rate(*got[s]) for s in SUITES)
                          + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
     if oracle:
@@ -361,12 +369,14 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
                      + " | ".join(rate(*oracle[s]) for s in SUITES) + f" | {_average(oracle)} |")
     lines.append("")
     glob = by.get(("learned", "global"))
-    if glob and oracle:
-        got = _suite_counts(glob)
+    for which, got in (("the four-suite model", _suite_counts(glob) if glob else None),
+                       ("the stack's defaults", defaults.get("global"))):
+        if not got or not oracle:
+            continue
         ratios = [(s, got[s][0] / got[s][1] / (oracle[s][0] / oracle[s][1])) for s in SUITES
                   if got[s][1] and oracle[s][0]]
-        lines.append("- Global-only as a share of the oracle's success, per suite (the issue's bar: at least 0.80): "
-                     + ", ".join(f"{s} {r:.2f}" for s, r in ratios) + ".")
+        lines.append(f"- Global-only ({which}) as a share of the oracle's success, per suite (the issue's bar: at "
+                     "least 0.80): " + ", ".join(f"{s} {r:.2f}" for s, r in ratios) + ".")
     for key, label in ROWS:
         eps = by.get(key)
         if not eps:
@@ -388,21 +398,24 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
                      + ", none counted as a success; worst commanded joint-limit excess "
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
-    for folder in _suite_model_folders():
-        eps = [e for e in suite_eps if e["suite"] == folder.name]
-        how = ", ".join(x for x in (f"{len(eps)} episodes", _provenance("learned", "glsr", folder)) if x)
-        if eps:
+    for mode, label, defaults_label in SUITE_MODES:
+        for folder in _suite_model_folders():
+            eps = [e for e in suite_eps if e["suite"] == folder.name and e["mode"] == mode]
+            if not eps:
+                continue
+            how = ", ".join(x for x in (f"{len(eps)} episodes", _provenance("learned", mode, folder)) if x)
             how += ", " + _checkpoint_note(eps, f"libero_panda_{folder.name}")
-        lines.append(f"- {SUITE_ROW.split(' (')[0]}, {folder.name} (`{folder.relative_to(ROOT)}/`): {how}; "
-                     f"{sum(bool(e['fault']) for e in eps)} faulted, none counted as a success.")
-    glsr = by.get(("learned", "glsr"))
-    if suite_eps and glsr:  # the defaults row borrows the four-suite GLSR row's episodes where no own model ran
-        own = sorted({e["suite"] for e in suite_eps})
-        routes = routed_tasks()
-        routed = "".join(f"; {t.split(':', 1)[1]} ({t.split(':')[0]}) from the row of `{stem}`, the model it is "
-                         "routed to (tcot_hybrid/checkpoints/task_models.json)" for t, stem in sorted(routes.items()))
-        lines.append(f"- {DEFAULTS_ROW.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other suites "
-                     f"from the four-suite GLSR row ({_checkpoint_note(glsr, 'libero_panda_default')}){routed}.")
+            lines.append(f"- {label.split(' (')[0]}, {folder.name} (`{folder.relative_to(ROOT)}/`): {how}; "
+                         f"{sum(bool(e['fault']) for e in eps)} faulted, none counted as a success.")
+        multi = by.get(("learned", mode))
+        own = sorted({e["suite"] for e in suite_eps if e["mode"] == mode})
+        if own and multi:  # a defaults row borrows the four-suite row's episodes where no own model ran
+            routed = "".join(f"; {t.split(':', 1)[1]} ({t.split(':')[0]}) from the row of `{stem}`, the model it is "
+                             "routed to (tcot_hybrid/checkpoints/task_models.json)"
+                             for t, stem in sorted(routed_tasks().items()))
+            lines.append(f"- {defaults_label.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other "
+                         f"suites from the four-suite {mode} row ({_checkpoint_note(multi, 'libero_panda_default')})"
+                         f"{routed}.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
@@ -434,7 +447,8 @@ def per_task_lines(by, suite_eps: list[dict]) -> list[str]:
     figure is lost. A report of the test set, not a tuning signal (docs/seeds.md)."""
     oracle = [e for e in _read(ORACLE) if e["perturb"] == "none"]
     cols = ([(label.split(" (")[0], by[key]) for key, label in ROWS if by.get(key)]
-            + [("GLSR, the suite's own model", suite_eps)] * bool(suite_eps) + [("oracle", oracle)])
+            + [(label.split(" (")[0], [e for e in suite_eps if e["mode"] == mode]) for mode, label, _ in SUITE_MODES
+               if any(e["mode"] == mode for e in suite_eps)] + [("oracle", oracle)])
     cells: dict = defaultdict(dict)
     for name, eps in cols:
         for e in eps:
