@@ -1,7 +1,7 @@
 """A model per task: which shipped model plans each libero_10 and libero_goal task (docs/libero-planner.md, "A model
 per task"). The rule, set before the runs (docs/seeds.md, stop 63): training-range layouts 30000-30019 of every task,
 global-only, with the four-suite model and the suite's own, screen the tasks (a candidate: the other model wins by at
-least 5 of 20); fresh development layouts 20173-20192 judge each candidate, both models, global-only and GLSR: it is
+least 5 of 20), and a second screen under GLSR on 30020-30039; fresh development layouts judge each candidate, both models, global-only and GLSR: it is
 routed to the other model (tcot_hybrid/checkpoints/task_models.json) if its GLSR gains at least 3 of 20 and its
 global-only loses none.
 
@@ -21,6 +21,11 @@ SCREENS = {suite: dev_runs.SuiteModelComparison(
     layouts_kind="training-range",
     models=((short, f"{suite}'s own model", OWN.format(suite)), MULTI))
     for suite, short in (("libero_10", "l10"), ("libero_goal", "goal"))}
+# the second screen, under GLSR (a task GLSR recovers and global-only never solves is invisible to the first)
+SCREENS_GLSR = {suite: dev_runs.SuiteModelComparison(
+    prefix=f"screen2_{short}", suite=suite, seed_ranges=(30020,), layouts=20, modes=("glsr",),
+    layouts_kind="training-range", models=((short, f"{suite}'s own model", OWN.format(suite)), MULTI))
+    for suite, short in (("libero_10", "l10"), ("libero_goal", "goal"))}
 STOVE = "libero_10:KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it"
 PUDDING = "libero_10:LIVING_ROOM_SCENE6_put_the_white_mug_on_the_plate_and_put_the_chocolate_pudding_to_the_right_of_the_plate"
 JUDGE = dev_runs.SuiteModelComparison(
@@ -31,6 +36,8 @@ JUDGE = dev_runs.SuiteModelComparison(
 def main() -> None:
     here = Path(__file__)
     parts = [(f"task-models-screen-{s}", c, here.with_name(f"task_models_screen_{s}.json")) for s, c in SCREENS.items()]
+    parts += [(f"task-models-screen2-{s}", c, here.with_name(f"task_models_screen2_{s}.json"))
+              for s, c in SCREENS_GLSR.items()]
     parts.append(("task-models-judge", JUDGE, here.with_suffix(".json")))
     dev_runs.main(__doc__,
                   lambda: [dev_runs.gather_suite(((n, cmd) for n, _, cmd in c.runs), out, c.suite) for _, c, out in parts],
