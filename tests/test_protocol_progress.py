@@ -120,3 +120,27 @@ def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(proto
     assert len(note) == 1
     assert "libero_10 from the suite models' rows" in note[0]
     assert "`0ld0ld0ld0ld0ld0`, **not the one shipped now**" in note[0]
+
+
+def test_the_defaults_rows_take_each_task_from_the_row_of_the_model_it_loads(protocol, tmp_path, monkeypatch):
+    """A task routed in task_models.json to the four-suite model comes from the four-suite row, its suite's other
+    tasks from the suite model's row, a suite without its own model from the four-suite row; the global-only
+    defaults row is put together the same way from the global-only rows."""
+    import tcot_hybrid.learning.checkpoint as ck
+
+    monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
+    for stem in ("libero_panda_default", "libero_panda_libero_10"):
+        (tmp_path / f"{stem}.safetensors").write_bytes(b"")
+    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {"libero_10:stove": "libero_panda_default"}}}))
+    multi = [_episode(s, t, 0, ok) for s, t, ok in (("libero_10", "stove", True), ("libero_10", "book", False),
+                                                   ("libero_goal", "knob", True))]
+    own = [_episode("libero_10", t, 0, ok) for t, ok in (("stove", False), ("book", True))]
+    picked = protocol.defaults_episodes(multi, own)
+    assert sorted((e["task"], e["success"]) for e in picked) == [
+        ("libero_10:book", True), ("libero_10:stove", True), ("libero_goal:knob", True)]
+    by = {("learned", m): [{**e, "mode": m, "checkpoint_hash": "c", "max_reference_limit_excess_rad": 0.0} for e in multi]
+          for m in ("global", "glsr")}
+    own_both = [{**e, "mode": m, "checkpoint_hash": "o"} for e in own for m in ("global", "glsr")]
+    lines = protocol.table1_lines(by, own_both)
+    assert sum(x.startswith(f"| ours: {protocol.DEFAULTS_GLOBAL_ROW} |") for x in lines) == 1
+    assert sum(x.startswith(f"| ours: {protocol.DEFAULTS_ROW} |") for x in lines) == 1

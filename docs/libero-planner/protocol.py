@@ -373,10 +373,10 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
                        ("the stack's defaults", defaults.get("global"))):
         if not got or not oracle:
             continue
-        ratios = [(s, got[s][0] / got[s][1] / (oracle[s][0] / oracle[s][1])) for s in SUITES
-                  if got[s][1] and oracle[s][0]]
+        shares = [f"{s} {got[s][0] / got[s][1] / (oracle[s][0] / oracle[s][1]):.2f}" if got[s][1] == PER_SUITE
+                  else f"{s} not whole yet ({got[s][1]} of {PER_SUITE} episodes)" for s in SUITES if oracle[s][0]]
         lines.append(f"- Global-only ({which}) as a share of the oracle's success, per suite (the issue's bar: at "
-                     "least 0.80): " + ", ".join(f"{s} {r:.2f}" for s, r in ratios) + ".")
+                     "least 0.80): " + ", ".join(shares) + ".")
     for key, label in ROWS:
         eps = by.get(key)
         if not eps:
