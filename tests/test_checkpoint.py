@@ -368,6 +368,12 @@ def test_a_task_routed_to_another_shipped_model_gets_it_and_a_route_to_nothing_i
     (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {routed: "libero_panda_v99"}}}))
     with pytest.raises(CheckpointError, match="KITCHEN_SCENE3.*'libero_panda_v99'.*not shipped.*libero_panda_default"):
         default_checkpoint("libero_panda", suite="libero_10", task=routed)
+    (tmp_path / ck.TASK_MODELS_FILE).write_text("{not json")
+    with pytest.raises(CheckpointError, match="not a task-model table"):
+        default_checkpoint("libero_panda", suite="libero_10", task=routed)
+    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {routed: 3}}}))
+    with pytest.raises(CheckpointError, match="must map task names to checkpoint stems"):
+        default_checkpoint("libero_panda", suite="libero_10", task=routed)
 
 
 def suite_models() -> list:

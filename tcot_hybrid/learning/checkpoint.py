@@ -444,7 +444,14 @@ def task_models(robot: str) -> dict[str, str]:
     path = checkpoints_dir() / TASK_MODELS_FILE
     if not path.is_file():
         return {}
-    routes = json.loads(path.read_text()).get("routes", {}).get(robot, {})
+    try:
+        routes = json.loads(path.read_text())["routes"].get(robot, {})
+    except (ValueError, KeyError, AttributeError) as exc:
+        raise CheckpointError(f"{path}: not a task-model table ({type(exc).__name__}: {exc}); expected "
+                              '{"routes": {robot: {task: checkpoint stem}}}') from exc
+    if not isinstance(routes, dict) or not all(isinstance(v, str) for v in routes.values()):
+        raise CheckpointError(f"{path}: routes of robot {robot!r} must map task names to checkpoint stems, got "
+                              f"{short_repr(routes)}")
     for task, stem in routes.items():
         if not (checkpoints_dir() / f"{stem}{SUFFIX}").is_file():
             have = sorted(x.stem for x in checkpoints_dir().glob(f"*{SUFFIX}"))
