@@ -23,7 +23,8 @@ class ObservationContext:
 
     camera:     the planner camera's model (intrinsics, pose, image size): the calibration a real robot has.
     robot_name: the robot (checkpoint compatibility, its own kinematic model).
-    options:    planner settings (``RunConfig.oracle`` / ``learned``, the checkpoint path).
+    options:    planner settings (``RunConfig.oracle`` / ``learned``, the checkpoint path, and the task and its
+                suite, which choose a shipped checkpoint when no path is given).
     robot:      the run's RobotSpec (its model, as a real robot knows its own): checkpoints are matched to it
                 by model digest, not by name. None when unknown (then the name is compared).
     world_kind: "workcell" or "libero": which world the task is in (checkpoints are refused in another world).
