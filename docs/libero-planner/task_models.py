@@ -32,6 +32,12 @@ JUDGE = dev_runs.SuiteModelComparison(
     prefix="taskm", suite="libero_10", seed_ranges=(20173,), layouts=20, tasks=(STOVE, PUDDING),
     models=(("l10", "libero_10's own model", OWN.format("libero_10")), MULTI))
 
+# the second screen's candidates (GLSR wins by at least 5 of 20), judged by the same rule on fresh layouts
+TOP_DRAWER = "libero_goal:open_the_top_drawer_and_put_the_bowl_inside"
+JUDGE2_GOAL = dev_runs.SuiteModelComparison(
+    prefix="taskm2", suite="libero_goal", seed_ranges=(20141,), layouts=20, tasks=(TOP_DRAWER,),
+    models=(("goal", "libero_goal's own model", OWN.format("libero_goal")), MULTI))
+
 
 def main() -> None:
     here = Path(__file__)
@@ -39,6 +45,7 @@ def main() -> None:
     parts += [(f"task-models-screen2-{s}", c, here.with_name(f"task_models_screen2_{s}.json"))
               for s, c in SCREENS_GLSR.items()]
     parts.append(("task-models-judge", JUDGE, here.with_suffix(".json")))
+    parts.append(("task-models-judge2-libero_goal", JUDGE2_GOAL, here.with_name("task_models_judge2_libero_goal.json")))
     dev_runs.main(__doc__,
                   lambda: [dev_runs.gather_suite(((n, cmd) for n, _, cmd in c.runs), out, c.suite) for _, c, out in parts],
                   {section: (lambda c=c, out=out: c.lines(out, here.name)) for section, c, out in parts})

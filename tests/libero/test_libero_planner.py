@@ -95,11 +95,13 @@ STOVE_TASK = "libero_10:KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on
 
 @pytest.mark.parametrize("task, stem", [(LONG_TASK, "libero_panda_libero_10"), (SPATIAL_TASK, "libero_panda_default"),
                                         ("libero_goal:turn_on_the_stove", "libero_panda_libero_goal"),
-                                        (STOVE_TASK, "libero_panda_default")])
+                                        (STOVE_TASK, "libero_panda_default"),
+                                        ("libero_goal:open_the_top_drawer_and_put_the_bowl_inside",
+                                         "libero_panda_default")])
 def test_learned_planner_loads_its_suites_own_shipped_model(task, stem):
     """Without --checkpoint, a libero_10 or libero_goal task's learned planner is its suite's own model (the paper's
-    TCoT row), a spatial task's the four-suite one, and libero_10's stove task the four-suite one it is routed to
-    (task_models.json); the resume key's checkpoint hash is that of the file loaded."""
+    TCoT row), a spatial task's the four-suite one, and a task routed to the four-suite one (task_models.json: libero_10's
+    stove, libero_goal's top drawer with the bowl) that one; the resume key's checkpoint hash is that of the file loaded."""
     from tcot_hybrid.evaluation.jobs import checkpoint_digest
 
     cfg = RunConfig(task=task, seed=0, init="shipped", planner="learned")
