@@ -120,8 +120,7 @@ def robot_given(argv: list[str], base: RunConfig) -> bool:
 def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
     """Record of a run that failed before its stack existed: what was asked, why it stopped, the hashes."""
     from tcot_hybrid.episode import file_digest, run_environment
-    from tcot_hybrid.planners import planner_checkpoint
-    from tcot_hybrid.tasks import make_task
+    from tcot_hybrid.planners import run_checkpoint
 
     def digest(path_of):
         try:
@@ -137,9 +136,7 @@ def _unstarted_record(cfg: RunConfig, exc: BaseException) -> dict:
             "fault": f"not started: {type(exc).__name__}: {exc}", "sim_time_s": 0.0, "wall_time_s": 0.0,
             "steps": 0, "plans": 0, "perturb": cfg.perturb.name, "events": [], "config": cfg.to_dict(),
             "config_hash": cfg.digest(), "robot_model_hash": digest(lambda: load_robot_spec(cfg.robot).mjcf_path),
-            "checkpoint_hash": digest(lambda: planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint,
-                                                                  suite=make_task(cfg.task).suite,
-                                                                  task=make_task(cfg.task).name)),
+            "checkpoint_hash": digest(lambda: run_checkpoint(cfg)),
             "versions": run_environment()}
 
 

@@ -324,12 +324,6 @@ def defaults_episodes(multi: list[dict], suite_eps: list[dict]) -> list[dict]:
     return out
 
 
-def routed_tasks() -> dict[str, str]:
-    from tcot_hybrid.learning.checkpoint import task_models
-
-    return task_models("libero_panda")
-
-
 def table1_lines(by, suite_eps: list[dict]) -> list[str]:
     lines = ["**Table 1 form: success on the shipped init states** (`make libero-protocol`, "
              "`docs/libero-planner/eval-protocol/`; ours: success [Wilson 95 % interval] n; the paper's: mean of 500 "
@@ -410,9 +404,11 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
         multi = by.get(("learned", mode))
         own = sorted({e["suite"] for e in suite_eps if e["mode"] == mode})
         if own and multi:  # a defaults row borrows the four-suite row's episodes where no own model ran
+            from tcot_hybrid.learning.checkpoint import task_models
+
             routed = "".join(f"; {t.split(':', 1)[1]} ({t.split(':')[0]}) from the row of `{stem}`, the model it is "
                              "routed to (tcot_hybrid/checkpoints/task_models.json)"
-                             for t, stem in sorted(routed_tasks().items()))
+                             for t, stem in sorted(task_models("libero_panda").items()))
             lines.append(f"- {defaults_label.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other "
                          f"suites from the four-suite {mode} row ({_checkpoint_note(multi, 'libero_panda_default')})"
                          f"{routed}.")

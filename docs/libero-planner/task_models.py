@@ -1,8 +1,8 @@
 """A model per task: which shipped model plans each libero_10 and libero_goal task (docs/libero-planner.md, "A model
 per task"). The rule, set before the runs (docs/seeds.md, stop 63): training-range layouts 30000-30019 of every task,
 global-only, with the four-suite model and the suite's own, screen the tasks (a candidate: the other model wins by at
-least 5 of 20), and a second screen under GLSR on 30020-30039; fresh development layouts judge each candidate, both models, global-only and GLSR: it is
-routed to the other model (tcot_hybrid/checkpoints/task_models.json) if its GLSR gains at least 3 of 20 and its
+least 5 of 20), and a second screen under GLSR on 30020-30039; fresh development layouts judge each candidate, both
+models, global-only and GLSR: it is routed to the other model (tcot_hybrid/checkpoints/task_models.json) if its GLSR gains at least 3 of 20 and its
 global-only loses none.
 
     .venv/bin/python docs/libero-planner/task_models.py --gather   # runs/dev/* -> task_models*.json

@@ -55,12 +55,10 @@ def checkpoint_digest(cfg: RunConfig) -> str | None:
     and its JSON metadata, which holds inference settings too (e.g. ``model.readout_radius_cells``). None for
     planners without one, or when it cannot be resolved (the episode then records why)."""
     from tcot_hybrid.learning.checkpoint import meta_path
-    from tcot_hybrid.planners import planner_checkpoint
-    from tcot_hybrid.tasks import make_task
+    from tcot_hybrid.planners import run_checkpoint
 
     try:
-        task = make_task(cfg.task)
-        path = planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint, suite=task.suite, task=task.name)
+        path = run_checkpoint(cfg)
     except TcotError:
         return None
     if path is None or not path.is_file():

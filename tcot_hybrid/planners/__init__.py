@@ -123,6 +123,15 @@ def planner_checkpoint(name: str, robot: str, checkpoint: str | Path | None, *, 
                                                                   robot_ref=robot_ref)
 
 
+def run_checkpoint(cfg: Any) -> Path | None:
+    """:func:`planner_checkpoint` of a run configuration (a ``RunConfig``): its planner, robot and ``--checkpoint``,
+    else the shipped model for its task and that task's suite."""
+    from tcot_hybrid.tasks import make_task
+
+    task = make_task(cfg.task)
+    return planner_checkpoint(cfg.planner, cfg.robot, cfg.checkpoint, suite=task.suite, task=task.name)
+
+
 def context_checkpoint(name: str, ctx: ObservationContext) -> Path | None:
     """:func:`planner_checkpoint` for a planner built from ``ctx`` (its options' checkpoint, task and suite)."""
     from tcot_hybrid.robot import robot_ref
