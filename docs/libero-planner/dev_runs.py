@@ -209,7 +209,7 @@ class SuiteModelComparison:
         which = f"--tasks {','.join(self.tasks)}" if self.tasks else f"--suite {self.suite}"
         cmd = (f"tcot eval {which} --planners learned --init sampled --episodes {self.layouts} "
                f"--modes {','.join(self.modes)}")
-        return tuple((f"{self.prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}")
+        return tuple((f"{self.prefix}_{short}{'b' * k}", label, f"{cmd} --seed-start {first} {flag}".rstrip())
                      for short, label, flag in self.models for k, first in enumerate(self.seed_ranges))
 
     def lines(self, out: Path, script: str) -> list[str]:

@@ -38,6 +38,15 @@ JUDGE2_GOAL = dev_runs.SuiteModelComparison(
     prefix="taskm2", suite="libero_goal", seed_ranges=(20141,), layouts=20, tasks=(TOP_DRAWER,),
     models=(("goal", "libero_goal's own model", OWN.format("libero_goal")), MULTI))
 
+# stop 64: the 97-point goal model's two tasks of stop 60's runs (docs/libero-planner.md, "The goal suite's own
+# model"), judged against the model the stack's defaults give them, either mode allowed to carry the gain
+WINE_CABINET = "libero_goal:put_the_wine_bottle_on_top_of_the_cabinet"
+JUDGE3_GOAL = dev_runs.SuiteModelComparison(
+    prefix="taskm3", suite="libero_goal", seed_ranges=(20161,), layouts=20, tasks=(TOP_DRAWER, WINE_CABINET),
+    models=(("defaults", "the stack's defaults (the four-suite model for the top drawer, libero_goal's own for the "
+             "wine bottle)", ""),
+            ("goal97", "the 97-point goal model", "--checkpoint runs/libero/planner_libero_goal97_corner.safetensors")))
+
 
 def main() -> None:
     here = Path(__file__)
@@ -46,6 +55,7 @@ def main() -> None:
               for s, c in SCREENS_GLSR.items()]
     parts.append(("task-models-judge", JUDGE, here.with_suffix(".json")))
     parts.append(("task-models-judge2-libero_goal", JUDGE2_GOAL, here.with_name("task_models_judge2_libero_goal.json")))
+    parts.append(("task-models-judge3-libero_goal", JUDGE3_GOAL, here.with_name("task_models_judge3_libero_goal.json")))
     dev_runs.main(__doc__,
                   lambda: [dev_runs.gather_suite(((n, cmd) for n, _, cmd in c.runs), out, c.suite) for _, c, out in parts],
                   {section: (lambda c=c, out=out: c.lines(out, here.name)) for section, c, out in parts})
