@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
 .PHONY: setup libero demo test bench planner libero-oracle-eval libero-planner libero-planner-eval libero-planner-perturb \
-	libero-protocol libero-protocol-suite clean
+	libero-protocol libero-protocol-suite libero-protocol-task clean
 
 $(BIN)/tcot: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -100,7 +100,9 @@ LIBERO_SUITES := libero_spatial,libero_object,libero_goal,libero_10
 # The one model for all four suites (the paper's TCoT-Multi row), named: without --checkpoint a suite that ships its
 # own model (tcot_hybrid/checkpoints/libero_panda_<suite>.*) loads that one
 MULTI_MODEL := --checkpoint tcot_hybrid/checkpoints/libero_panda_default.safetensors
-SUITE_MODEL_FILES = $(filter-out %default.safetensors %direct_%,$(wildcard tcot_hybrid/checkpoints/libero_panda_*.safetensors))
+SUITE_MODEL_FILES = $(filter-out %default.safetensors %direct_% %_tasks_%,$(wildcard tcot_hybrid/checkpoints/libero_panda_*.safetensors))
+# models shipped for the tasks tcot_hybrid/checkpoints/task_models.json routes to them alone (libero_panda_tasks_<name>)
+TASK_MODEL_FILES = $(wildcard tcot_hybrid/checkpoints/libero_panda_tasks_*.safetensors)
 libero-oracle-eval: setup
 	$(BIN)/tcot eval --suite $(LIBERO_SUITES) --planners oracle --init shipped --episodes 50 --seed-start 0 \
 		--workers 2 --out docs/eval-libero/oracle-shipped
@@ -171,6 +173,11 @@ ifeq ($(LIBERO_PLANNER_EPISODES),100)
 	$(call libero_train_resumable,train_libero_goal_stove_lit,planner_libero_goal_stove_lit,train_libero_goal_stove_lit,)
 	cp runs/libero/planner_libero_goal_stove_lit.safetensors tcot_hybrid/checkpoints/libero_panda_libero_goal.safetensors
 	cp runs/libero/planner_libero_goal_stove_lit.json tcot_hybrid/checkpoints/libero_panda_libero_goal.json
+	# libero_goal's 97-point model (stop 60), which task_models.json routes the wine bottle on top of the cabinet to
+	# (stop 64): the four-suite model widened to 97 global points, continued on that suite's demonstrations alone
+	$(call libero_train_resumable,train_libero_goal97_corner,planner_libero_goal97_corner,train_libero_goal97_corner,)
+	cp runs/libero/planner_libero_goal97_corner.safetensors tcot_hybrid/checkpoints/libero_panda_tasks_goal97.safetensors
+	cp runs/libero/planner_libero_goal97_corner.json tcot_hybrid/checkpoints/libero_panda_tasks_goal97.json
 	# libero_10's own model (stop 58): v12 widened to 97 global points, continued on that suite's demonstrations alone
 	$(call libero_train_resumable,train_libero10_100_corner,planner_libero10_100_corner,train_libero10_100_corner,)
 	# and six epochs more on the same demonstrations (stop 59: its held-out error was still falling)
@@ -250,13 +257,13 @@ libero-planner-perturb: setup
 # machine from progress.jsonl.gz (`protocol.py --save-progress`, committed) when its commit is the same. The direct baseline on init states 0-1 only: 87 s an episode on one worker, 24 h for 2000 on 2 cores.
 PROTOCOL := docs/libero-planner/eval-protocol
 # $(1) planner, $(2) mode, $(3) episodes per task; optional $(4) folder (default $(PROTOCOL)), $(5) suites (default
-# the four), $(6) further tcot eval flags
+# the four), $(6) further tcot eval flags, $(7) the selection instead of $(5) (`--tasks A,B`)
 HEAD_COMMIT = $$(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout')
 define libero_protocol_row
 	mkdir -p $(or $(4),$(PROTOCOL))
 	$(BIN)/python docs/libero-planner/protocol.py --restore-progress $(or $(4),$(PROTOCOL))
 	$(BIN)/python docs/libero-planner/protocol.py --start-row $(or $(4),$(PROTOCOL)) $(1) $(2) "$(HEAD_COMMIT)"
-	$(BIN)/tcot eval --suite $(or $(5),$(LIBERO_SUITES)) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
+	$(BIN)/tcot eval $(or $(7),--suite $(or $(5),$(LIBERO_SUITES))) --planners $(1) --modes $(2) --init shipped --episodes $(3) \
 		--seed-start 0 --workers 2 --out $(or $(4),$(PROTOCOL)) $(6)
 	$(BIN)/python docs/libero-planner/protocol.py --keep-row $(or $(4),$(PROTOCOL)) $(1) $(2) "$(HEAD_COMMIT)"
 endef
@@ -283,6 +290,21 @@ $(call libero_protocol_row,learned,global,50,$(PROTOCOL_SUITE)/$(1),$(1),\
 endef
 libero-protocol-suite: setup
 	$(foreach s,$(SUITE_MODELS),$(call suite_protocol_row,$(s)))
+	$(BIN)/python docs/libero-planner/protocol.py
+
+# A model shipped for routed tasks alone (TASK_MODEL_FILES): GLSR and global-only on the tasks task_models.json routes
+# to it, one folder per model under $(PROTOCOL_TASK); the defaults rows take those tasks' episodes from there
+PROTOCOL_TASK := docs/libero-planner/eval-protocol-task
+TASK_MODELS := $(patsubst tcot_hybrid/checkpoints/%.safetensors,%,$(TASK_MODEL_FILES))
+define task_protocol_row
+$(call libero_protocol_row,learned,glsr,50,$(PROTOCOL_TASK)/$(1),,\
+	--checkpoint tcot_hybrid/checkpoints/$(1).safetensors,--tasks $$($(BIN)/python docs/libero-planner/protocol.py --routed-tasks $(1)))
+$(call libero_protocol_row,learned,global,50,$(PROTOCOL_TASK)/$(1),,\
+	--checkpoint tcot_hybrid/checkpoints/$(1).safetensors,--tasks $$($(BIN)/python docs/libero-planner/protocol.py --routed-tasks $(1)))
+
+endef
+libero-protocol-task: setup
+	$(foreach m,$(TASK_MODELS),$(call task_protocol_row,$(m)))
 	$(BIN)/python docs/libero-planner/protocol.py
 
 clean:

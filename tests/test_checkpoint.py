@@ -381,7 +381,24 @@ def suite_models() -> list:
     from tcot_hybrid.learning.checkpoint import checkpoints_dir
 
     return sorted(p for p in checkpoints_dir().glob("libero_panda_*.safetensors")
-                  if not p.stem.endswith("default") and "_direct_" not in p.stem)
+                  if not p.stem.endswith("default") and "_direct_" not in p.stem and "_tasks_" not in p.stem)
+
+
+def test_every_shipped_task_model_is_routed_to_and_made_for_the_suites_of_its_tasks():
+    """A ``libero_panda_tasks_<name>`` checkpoint is shipped for the tasks task_models.json routes to it alone (no
+    suite loads it by default): some task must be routed to it, and it must be a small LIBERO trajectory checkpoint
+    trained on those tasks' suites."""
+    from tcot_hybrid.learning.checkpoint import checkpoints_dir, task_models
+    from tcot_hybrid.robot import load_robot_spec
+
+    routes = task_models("libero_panda")
+    for p in sorted(checkpoints_dir().glob("libero_panda_tasks_*.safetensors")):
+        tasks = [t for t, stem in routes.items() if stem == p.stem]
+        assert tasks, f"{p.name} is shipped but no task is routed to it"
+        assert p.stat().st_size < 10e6
+        ck = load_checkpoint(p, robot_spec=load_robot_spec("libero_panda"), kind="trajectory", world="libero")
+        assert ck.meta["height_ref"] == "camera" and ck.model.cfg.rot_head
+        assert {t.split(":")[0] for t in tasks} <= set(ck.meta["train_config"]["suites"]), p.name
 
 
 def test_every_shipped_suite_model_was_trained_on_that_suite_alone():

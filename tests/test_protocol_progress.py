@@ -57,6 +57,18 @@ def test_a_row_still_running_is_left_out_of_the_tables(protocol, tmp_path, monke
     assert "the learned glsr row is in progress in episodes.jsonl (1 of 8 episodes)" in capsys.readouterr().out
 
 
+def test_a_task_model_folder_is_whole_with_every_init_state_of_the_tasks_routed_to_its_model(protocol, tmp_path,
+                                                                                                monkeypatch, capsys):
+    folder = tmp_path / "eval-protocol-task" / "libero_panda_tasks_wide"
+    monkeypatch.setattr(protocol, "TASK_EVAL", folder.parent)
+    monkeypatch.setattr(protocol, "PER_TASK", 2)
+    monkeypatch.setattr(protocol, "routed_tasks", lambda stem: ["libero_goal:a", "libero_goal:b"])
+    eps = [_episode("libero_goal", t, seed, True) for t in ("a", "b") for seed in (0, 1)]
+    assert protocol._complete_rows(eps[:3], folder) == []
+    assert "the learned glsr row is in progress in episodes.jsonl (3 of 4 episodes)" in capsys.readouterr().out
+    assert len(protocol._complete_rows(eps, folder)) == 4
+
+
 def test_a_rerun_half_done_is_in_progress_and_not_mixed_with_the_run_before(protocol, tmp_path, capsys):
     """A complete row, then a rerun (other defaults or code: other keys) of part of it: the tables keep the first run
     whole until the rerun has every init state, then take the rerun whole."""
@@ -115,7 +127,7 @@ def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(proto
     glsr = [with_hash(_episode(s, "t", i, True), "0ld0ld0ld0ld0ld0")
             for s in ("libero_spatial", "libero_object", "libero_goal", "libero_10") for i in range(2)]
     own = [with_hash(_episode("libero_10", "t", i, True), "5u1te5u1te5u1te5") for i in range(2)]
-    lines = protocol.table1_lines({("learned", "glsr"): glsr}, own)
+    lines = protocol.table1_lines({("learned", "glsr"): glsr}, own, {})
     note = [x for x in lines if x.startswith(f"- {protocol.DEFAULTS_ROW.split(' (')[0]}:")]
     assert len(note) == 1
     assert "libero_10 from the suite models' rows" in note[0]
@@ -123,24 +135,31 @@ def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(proto
 
 
 def test_the_defaults_rows_take_each_task_from_the_row_of_the_model_it_loads(protocol, tmp_path, monkeypatch):
-    """A task routed in task_models.json to the four-suite model comes from the four-suite row, its suite's other
-    tasks from the suite model's row, a suite without its own model from the four-suite row; the global-only
-    defaults row is put together the same way from the global-only rows."""
+    """A task routed in task_models.json to the four-suite model comes from the four-suite row, one routed to a
+    model shipped for routed tasks alone from that model's row (left out while it has none), its suite's other tasks
+    from the suite model's row, a suite without its own model from the four-suite row; the global-only defaults row
+    is put together the same way from the global-only rows."""
     import tcot_hybrid.learning.checkpoint as ck
 
     monkeypatch.setattr(ck, "checkpoints_dir", lambda: tmp_path)
-    for stem in ("libero_panda_default", "libero_panda_libero_10"):
+    for stem in ("libero_panda_default", "libero_panda_libero_10", "libero_panda_tasks_wide"):
         (tmp_path / f"{stem}.safetensors").write_bytes(b"")
-    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {"libero_10:stove": "libero_panda_default"}}}))
+    (tmp_path / ck.TASK_MODELS_FILE).write_text(json.dumps({"routes": {"libero_panda": {
+        "libero_10:stove": "libero_panda_default", "libero_10:mug": "libero_panda_tasks_wide"}}}))
     multi = [_episode(s, t, 0, ok) for s, t, ok in (("libero_10", "stove", True), ("libero_10", "book", False),
-                                                   ("libero_goal", "knob", True))]
-    own = [_episode("libero_10", t, 0, ok) for t, ok in (("stove", False), ("book", True))]
+                                                   ("libero_10", "mug", False), ("libero_goal", "knob", True))]
+    own = [_episode("libero_10", t, 0, ok) for t, ok in (("stove", False), ("book", True), ("mug", False))]
     picked = protocol.defaults_episodes(multi, own)
     assert sorted((e["task"], e["success"]) for e in picked) == [
         ("libero_10:book", True), ("libero_10:stove", True), ("libero_goal:knob", True)]
+    wide = {"libero_panda_tasks_wide": [_episode("libero_10", "mug", 0, True)]}
+    picked = protocol.defaults_episodes(multi, own, wide)
+    assert sorted((e["task"], e["success"]) for e in picked) == [
+        ("libero_10:book", True), ("libero_10:mug", True), ("libero_10:stove", True), ("libero_goal:knob", True)]
+    assert protocol.routed_tasks("libero_panda_tasks_wide") == ["libero_10:mug"]
     by = {("learned", m): [{**e, "mode": m, "checkpoint_hash": "c", "max_reference_limit_excess_rad": 0.0} for e in multi]
           for m in ("global", "glsr")}
     own_both = [{**e, "mode": m, "checkpoint_hash": "o"} for e in own for m in ("global", "glsr")]
-    lines = protocol.table1_lines(by, own_both)
+    lines = protocol.table1_lines(by, own_both, {})
     assert sum(x.startswith(f"| ours: {protocol.DEFAULTS_GLOBAL_ROW} |") for x in lines) == 1
     assert sum(x.startswith(f"| ours: {protocol.DEFAULTS_ROW} |") for x in lines) == 1

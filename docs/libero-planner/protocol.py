@@ -40,6 +40,9 @@ EVAL = HERE / "eval-protocol"
 # One model per suite (the paper's TCoT row; the rows above are one model for all four, its TCoT-Multi): GLSR with
 # each suite's own shipped model, one folder per suite (Makefile libero-protocol-suite)
 SUITE_EVAL = HERE / "eval-protocol-suite"
+# A model shipped for routed tasks alone (libero_panda_tasks_<name>, tcot_hybrid/checkpoints/task_models.json): GLSR
+# and global-only on the tasks routed to it, one folder per model (Makefile libero-protocol-task)
+TASK_EVAL = HERE / "eval-protocol-task"
 SUITE_ROW = "GLSR, each suite's own model (the paper's TCoT row; `libero_panda_<suite>`, where shipped)"
 SUITE_GLOBAL_ROW = "global trajectory only, each suite's own model (`libero_panda_<suite>`, where shipped)"
 # what `tcot eval` runs without --checkpoint: the suite-model row's episodes where a suite has its own model, the
@@ -50,7 +53,8 @@ DEFAULTS_GLOBAL_ROW = "global trajectory only at the stack's defaults (the same 
 # the suite-model folders' rows, (mode, label) in table order
 SUITE_MODES = (("global", SUITE_GLOBAL_ROW, DEFAULTS_GLOBAL_ROW), ("glsr", SUITE_ROW, DEFAULTS_ROW))
 ORACLE = ROOT / "docs" / "eval-libero" / "oracle-shipped" / "episodes.jsonl"
-PER_SUITE = 500  # 10 tasks x 50 shipped init states
+PER_TASK = 50  # shipped init states a task
+PER_SUITE = 10 * PER_TASK  # 10 tasks a suite
 # The direct baseline runs on init states 0-1 of each task only (Makefile: 87 s an episode, 24 h for 2000)
 PLANNED_PER_SUITE = {("direct", "global"): 20}
 RECORD_FIELDS = ("task", "suite", "planner", "mode", "perturb", "seed", "success", "fault", "stopped_by", "steps",
@@ -102,8 +106,20 @@ def _run_row(e: dict) -> tuple[str, str, str]:
     return e["planner"], e["mode"], e["perturb"]
 
 
-def _row_size(row: tuple[str, str], suites: set[str]) -> int:
+def _row_size(row: tuple[str, str], folder: Path) -> int:
+    """Episodes in a whole row of ``folder``: every planned init state of the four suites, of a suite-model folder's
+    one suite, or of the tasks routed to a task-model folder's model."""
+    if folder.parent == TASK_EVAL:
+        return len(routed_tasks(folder.name)) * PER_TASK
+    suites = {folder.name} if folder.parent == SUITE_EVAL else set(SUITES)
     return len(suites) * PLANNED_PER_SUITE.get(row, PER_SUITE)
+
+
+def routed_tasks(stem: str) -> list[str]:
+    """The tasks tcot_hybrid/checkpoints/task_models.json routes to the shipped checkpoint ``stem``."""
+    from tcot_hybrid.learning.checkpoint import task_models
+
+    return sorted(t for t, s in task_models("libero_panda").items() if s == stem)
 
 
 def _complete_rows(episodes: list[dict], folder: Path) -> list[dict]:
@@ -119,7 +135,6 @@ def _complete_rows(episodes: list[dict], folder: Path) -> list[dict]:
     by: dict = defaultdict(list)
     for e in episodes:
         by[_run_row(e)].append(e)
-    suites = {folder.name} if folder.parent == SUITE_EVAL else set(SUITES)
     out = []
     for (planner, mode, perturb), eps in sorted(by.items()):
         latest: dict = {}
@@ -127,7 +142,7 @@ def _complete_rows(episodes: list[dict], folder: Path) -> list[dict]:
             if (e["task"], e["seed"]) in latest:
                 latest = {}  # a new run of this row starts here
             latest[(e["task"], e["seed"])] = e
-        want = _row_size((planner, mode), suites)
+        want = _row_size((planner, mode), folder)
         if len(latest) >= want:
             out += latest.values()
         else:
@@ -227,6 +242,26 @@ def _suite_model_folders() -> list[Path]:
     return sorted(p for p in SUITE_EVAL.glob("*") if p.is_dir()) if SUITE_EVAL.is_dir() else []
 
 
+def _task_model_folders() -> list[Path]:
+    return sorted(p for p in TASK_EVAL.glob("*") if p.is_dir()) if TASK_EVAL.is_dir() else []
+
+
+def _task_model_records() -> dict[str, list[dict]]:
+    """Global-only and GLSR episodes of each task-model folder, by checkpoint stem (the folder's name): the tasks
+    task_models.json routes to that model, run with it (one checkpoint per folder, as in :func:`_rows`)."""
+    out = {}
+    for folder in _task_model_folders():
+        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] in ("glsr", "global")]
+        strays = sorted({e["task"] for e in eps} - set(routed_tasks(folder.name)))
+        hashes = sorted({e["checkpoint_hash"] for e in eps})
+        if strays or len(hashes) > 1:
+            raise SystemExit(f"{folder}: holds episodes of tasks not routed to {folder.name} ({', '.join(strays)}) or "
+                             f"of {len(hashes)} checkpoints ({', '.join(map(str, hashes))}); the tasks routed to its "
+                             "model and that model alone per folder")
+        out[folder.name] = eps
+    return out
+
+
 def _suite_model_records() -> list[dict]:
     """Global-only and GLSR episodes of the suite-model rows: each suite's folder holds that suite's tasks run with
     its own model (one checkpoint per folder, as in :func:`_rows`)."""
@@ -308,23 +343,27 @@ def _provenance(planner: str, mode: str, folder: Path = EVAL) -> str | None:
     return ", ".join(parts) or None
 
 
-def defaults_episodes(multi: list[dict], suite_eps: list[dict]) -> list[dict]:
+def defaults_episodes(multi: list[dict], suite_eps: list[dict], task_eps: dict[str, list[dict]] | None = None
+                      ) -> list[dict]:
     """A defaults row of one mode: each task's episodes from the row of the model `tcot eval` loads for it without
     --checkpoint (tcot_hybrid.learning.checkpoint.default_checkpoint: a task routed in task_models.json, else its
-    suite's own model, else the four-suite one): the suite-model row's (``suite_eps``) or the four-suite row's
-    (``multi``); a task whose model neither row ran is left out (the row's n says so)."""
+    suite's own model, else the four-suite one): the suite-model row's (``suite_eps``), the four-suite row's
+    (``multi``) or the row of the task model it is routed to (``task_eps``, by checkpoint stem); a task whose model
+    no row ran is left out (the row's n says so)."""
     from tcot_hybrid.learning.checkpoint import default_checkpoint
 
+    task_eps = task_eps or {}
     out = []
     for task in sorted({e["task"] for e in multi + suite_eps}):
         suite = task.split(":")[0]
         stem = default_checkpoint("libero_panda", suite=suite, task=task).stem
-        src = multi if stem == "libero_panda_default" else suite_eps if stem == f"libero_panda_{suite}" else []
+        src = (multi if stem == "libero_panda_default" else suite_eps if stem == f"libero_panda_{suite}"
+               else task_eps.get(stem, []))
         out += [e for e in src if e["task"] == task]
     return out
 
 
-def table1_lines(by, suite_eps: list[dict]) -> list[str]:
+def table1_lines(by, suite_eps: list[dict], task_eps: dict[str, list[dict]]) -> list[str]:
     lines = ["**Table 1 form: success on the shipped init states** (`make libero-protocol`, "
              "`docs/libero-planner/eval-protocol/`; ours: success [Wilson 95 % interval] n; the paper's: mean of 500 "
              "episodes per suite, its ± one standard error is 0.2-1.4 points):", "",
@@ -354,7 +393,8 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
                      + f" | {_average(got)} |")
         multi = by.get(("learned", mode))
         if multi:
-            defaults[mode] = got = _suite_counts(defaults_episodes(multi, own))
+            routed_eps = {stem: [e for e in eps if e["mode"] == mode] for stem, eps in task_eps.items()}
+            defaults[mode] = got = _suite_counts(defaults_episodes(multi, own, routed_eps))
             lines.append(f"| ours: {defaults_label} | " + " | ".join(rate(*got[s]) for s in SUITES)
                          + f" | {_average(got)} |")
     oracle = _suite_counts([e for e in _read(ORACLE) if e["perturb"] == "none"])
@@ -412,6 +452,14 @@ def table1_lines(by, suite_eps: list[dict]) -> list[str]:
             lines.append(f"- {defaults_label.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other "
                          f"suites from the four-suite {mode} row ({_checkpoint_note(multi, 'libero_panda_default')})"
                          f"{routed}.")
+    for folder in _task_model_folders():
+        for mode, label, _ in SUITE_MODES:
+            eps = [e for e in task_eps.get(folder.name, []) if e["mode"] == mode]
+            if eps:
+                how = ", ".join(x for x in (f"{len(eps)} episodes", _provenance("learned", mode, folder)) if x)
+                lines.append(f"- {label.split(',')[0]}, the tasks routed to `{folder.name}` (`{folder.relative_to(ROOT)}/`): "
+                             f"{how}, {_checkpoint_note(eps, folder.name)}; {sum(bool(e['fault']) for e in eps)} "
+                             "faulted, none counted as a success.")
     lines.append("- Per task: `docs/libero-planner/eval-protocol/per_task.md`.")
     det = EVAL / "eval-learned-glsr.json"
     if det.is_file():
@@ -438,13 +486,16 @@ def table4_lines(by) -> list[str]:
     return lines
 
 
-def per_task_lines(by, suite_eps: list[dict]) -> list[str]:
+def per_task_lines(by, suite_eps: list[dict], task_eps: dict[str, list[dict]]) -> list[str]:
     """Successes of every row per task (k of n shipped init states), for eval-protocol/per_task.md: where a suite's
     figure is lost. A report of the test set, not a tuning signal (docs/seeds.md)."""
     oracle = [e for e in _read(ORACLE) if e["perturb"] == "none"]
     cols = ([(label.split(" (")[0], by[key]) for key, label in ROWS if by.get(key)]
             + [(label.split(" (")[0], [e for e in suite_eps if e["mode"] == mode]) for mode, label, _ in SUITE_MODES
-               if any(e["mode"] == mode for e in suite_eps)] + [("oracle", oracle)])
+               if any(e["mode"] == mode for e in suite_eps)]
+            + [(f"{label.split(',')[0]}, the model a task is routed to", eps) for mode, label, _ in SUITE_MODES
+               if (eps := [e for v in task_eps.values() for e in v if e["mode"] == mode])]
+            + [("oracle", oracle)])
     cells: dict = defaultdict(dict)
     for name, eps in cols:
         for e in eps:
@@ -470,6 +521,8 @@ def main() -> None:
                      help="append FOLDER/progress.jsonl.gz's episodes missing from FOLDER/episodes.jsonl")
     act.add_argument("--start-row", nargs=4, metavar=("FOLDER", "PLANNER", "MODE", "COMMIT"),
                      help="before a row's tcot eval: append COMMIT to FOLDER/eval-PLANNER-MODE.started")
+    act.add_argument("--routed-tasks", metavar="STEM",
+                     help="print the tasks task_models.json routes to the shipped checkpoint STEM, comma-separated")
     act.add_argument("--keep-row", nargs=4, metavar=("FOLDER", "PLANNER", "MODE", "COMMIT"),
                      help="after a row's tcot eval: keep FOLDER/eval.json as eval-PLANNER-MODE.json and, as its "
                           ".commit, the commits its parts started at (COMMIT for a run in one part), unless the run "
@@ -478,6 +531,12 @@ def main() -> None:
     if args.start_row:
         folder, planner, mode, commit = args.start_row
         start_row(Path(folder), planner, mode, commit)
+        return
+    if args.routed_tasks:
+        tasks = routed_tasks(args.routed_tasks)
+        if not tasks:
+            raise SystemExit(f"no task is routed to {args.routed_tasks!r} (tcot_hybrid/checkpoints/task_models.json)")
+        print(",".join(tasks))
         return
     if args.keep_row:
         folder, planner, mode, commit = args.keep_row
@@ -491,8 +550,9 @@ def main() -> None:
         return
     by = _rows()
     suite_eps = _suite_model_records()  # reads (and rewrites) each suite folder's records once
-    atomic_write_text(EVAL / "per_task.md", "\n".join(per_task_lines(by, suite_eps)) + "\n")
-    text = "\n".join(table1_lines(by, suite_eps) + table4_lines(by)) + "\n"
+    task_eps = _task_model_records()  # and each task-model folder's
+    atomic_write_text(EVAL / "per_task.md", "\n".join(per_task_lines(by, suite_eps, task_eps)) + "\n")
+    text = "\n".join(table1_lines(by, suite_eps, task_eps) + table4_lines(by)) + "\n"
     for target in (ROOT / "docs" / "libero-planner.md", ROOT / "README.md"):
         update_readme_section(target, "libero-protocol", text)
     print(text)

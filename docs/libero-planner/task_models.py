@@ -3,7 +3,8 @@ per task"). The rule, set before the runs (docs/seeds.md, stop 63): training-ran
 global-only, with the four-suite model and the suite's own, screen the tasks (a candidate: the other model wins by at
 least 5 of 20), and a second screen under GLSR on 30020-30039; fresh development layouts judge each candidate, both
 models, global-only and GLSR: it is routed to the other model (tcot_hybrid/checkpoints/task_models.json) if its GLSR gains at least 3 of 20 and its
-global-only loses none.
+global-only loses none. Stop 64: two candidates from stop 60's runs, for libero_goal's 97-point model, judged the
+same way with either mode allowed to carry the gain (JUDGE3_GOAL).
 
     .venv/bin/python docs/libero-planner/task_models.py --gather   # runs/dev/* -> task_models*.json
     .venv/bin/python docs/libero-planner/task_models.py            # those -> docs/libero-planner.md
