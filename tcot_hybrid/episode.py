@@ -407,6 +407,7 @@ class EpisodeRunner:
             "robot": cfg.robot, "controller": cfg.controller, "ik": cfg.ik, "planner": cfg.planner,
             "mode": cfg.supervisor.mode, "seed": cfg.seed, "init": s.task.init,
             **({"init_note": s.task.init_note} if s.task.init_note else {}),
+            **({"fixture_seed": s.task.fixture_seed} if s.task.fixture_seed is not None else {}),
             "success": success, "fault": self.fault,
             "success_time_s": self.success_time_s if success else None,
             "sim_time_s": round(s.sim.time_s, 4), "wall_time_s": round(wall_time_s, 4),

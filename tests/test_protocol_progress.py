@@ -29,7 +29,7 @@ def _episode(suite, task, seed, success, mode="glsr"):
     return {"task": f"{suite}:{task}", "suite": suite, "planner": "learned", "mode": mode, "perturb": "none",
             "seed": seed, "success": success, "fault": None, "stopped_by": "simulator", "steps": 40, "events": events,
             "key": f"{suite}:{task}|learned|{mode}|none|{seed}", "robot": "libero_panda", "controller": "computed_torque",
-            "ik": "mink", "sweep": "-", "sim_time_s": 4.0, "wall_time_s": 2.0}
+            "ik": "mink", "sweep": "-", "sim_time_s": 4.0, "wall_time_s": 2.0, "fixture_seed": 2_000_000 + seed}
 
 
 def test_saved_progress_restores_every_episode_and_the_same_figures(protocol, tmp_path):
@@ -120,7 +120,8 @@ def test_a_row_resumed_at_another_commit_names_every_commit_its_parts_started_at
     assert (tmp_path / "eval-learned-glsr.commit").read_text() == "b00c0de\n"
 
 
-def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(protocol):
+def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(protocol, monkeypatch, tmp_path):
+    monkeypatch.setattr(protocol, "ORACLE", tmp_path / "no_oracle_run.jsonl")
     def with_hash(e, checkpoint):
         return {**e, "checkpoint_hash": checkpoint, "max_reference_limit_excess_rad": 0.0}
 
@@ -130,6 +131,13 @@ def test_the_stack_defaults_row_names_the_four_suite_checkpoint_it_borrows(proto
     lines = protocol.table1_lines({("learned", "glsr"): glsr}, own, {})
     note = [x for x in lines if x.startswith(f"- {protocol.DEFAULTS_ROW.split(' (')[0]}:")]
     assert len(note) == 1
+    assert protocol.ONE_DRAW_NOTE not in lines  # every episode drew its fixtures
+    # a row any of whose episodes kept the fixtures at the scene build's placement (before stop 64) is marked
+    glsr[0] = {k: v for k, v in glsr[0].items() if k != "fixture_seed"}
+    lines = protocol.table1_lines({("learned", "glsr"): glsr}, own, {})
+    assert sum(x.startswith("| ours: GLSR (Algorithm 1)") and x.split(" | ")[0].endswith(" °") for x in lines) == 1
+    assert sum(x.startswith(f"| ours: {protocol.DEFAULTS_ROW} °") for x in lines) == 1  # it borrows the marked one
+    assert protocol.ONE_DRAW_NOTE in lines
     assert "libero_10 from the suite models' rows" in note[0]
     assert "`0ld0ld0ld0ld0ld0`, **not the one shipped now**" in note[0]
 

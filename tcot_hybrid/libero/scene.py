@@ -84,6 +84,10 @@ def _env_class(problem_name: str):
 # (no two simulations ever share one) and puts it back when it closes.
 _IDLE: dict[tuple[str, float], "LiberoScene"] = {}
 BUILD_SEED = 0  # numpy seed for LIBERO's fixture placement when a scene is built
+# A shipped init state holds no fixture's place (fixtures have no joints): LIBERO's evaluation resets the env, whose
+# sampler draws every fixture's place afresh (+-1 cm, its regions), before it sets the state. This stack draws them
+# the same way, seeded by the state's number: numpy seed SHIPPED_FIXTURE_SEED + that number (docs/libero.md).
+SHIPPED_FIXTURE_SEED = 2_000_000
 # [rad] std of the gaussian offset from home on each arm joint of a sampled layout: robosuite's default
 # initialization noise (gaussian, 0.02). LIBERO's shipped init states start so (largest joint 0.01-0.05 rad
 # off home on the 20 read), while its own evaluation wrapper, and this stack before stop 49, reset the arm
@@ -178,7 +182,7 @@ class LiberoScene:
         model.opt.timestep = sim_dt
         _fast_render_settings(model, max_image_px)
         # robosuite's reset hides its debugging sites (the gripper's aiming line and frames); its constructor leaves
-        # them shown, and a scene set straight to a shipped init state is never reset: hide them once here
+        # them shown (a scene set to a shipped state with its build's fixtures is never reset): hide them once here
         env.visualize(vis_settings={name: False for name in env._visualizations})
         scene = cls(env=env, model=model, data=data, bddl_path=bddl_path)
         scene.built_body_pose = (model.body_pos.copy(), model.body_quat.copy())
@@ -235,15 +239,19 @@ class LiberoScene:
                 if isinstance(s, MultiRegionRandomSampler) and s.mujoco_objects
                 and all(o.name in movable for o in s.mujoco_objects)}
 
-    def set_state(self, state: np.ndarray) -> None:
-        """A shipped init state: [time, qpos, qvel] as LIBERO saved it."""
+    def set_state(self, state: np.ndarray, *, fixture_seed: int | None) -> None:
+        """A shipped init state: [time, qpos, qvel] as LIBERO saved it. Fixtures are not in the state: with
+        ``fixture_seed`` LIBERO's sampler draws their places first, seeded, as the reset before LIBERO's evaluation
+        sets a state draws them (:data:`SHIPPED_FIXTURE_SEED`); None keeps them where this scene's build placed
+        them (every state of a task at one draw: this stack's protocol before stop 64)."""
         m = self.model
         expected = 1 + m.nq + m.nv
         if state.shape != (expected,):
             raise ValueError(f"init state has {state.shape} values, the scene needs ({expected},)")
-        # fixtures are not in the state: put them where this scene's build placed them (a sampled layout
-        # of an earlier episode may have moved them)
-        m.body_pos[:], m.body_quat[:] = self.built_body_pose
+        if fixture_seed is None:  # a sampled layout of an earlier episode may have moved them
+            m.body_pos[:], m.body_quat[:] = self.built_body_pose
+        else:  # a LIBERO reset: the fixtures drawn; the objects and the arm it placed are replaced below
+            self.sample_layout(fixture_seed, arm_noise_rad=0.0)
         self.data.qpos[:] = state[1:1 + m.nq]
         self.data.qvel[:] = state[1 + m.nq:]
         mujoco.mj_forward(m, self.data)

@@ -17,7 +17,7 @@ import numpy as np
 
 from tcot_hybrid.errors import ConfigError
 from tcot_hybrid.libero import libero_available, require_libero
-from tcot_hybrid.libero.scene import LayoutSpread
+from tcot_hybrid.libero.scene import SHIPPED_FIXTURE_SEED, LayoutSpread
 from tcot_hybrid.tasks.base import Task, World
 from tcot_hybrid.tasks.objects import ObjectInfo
 
@@ -201,9 +201,12 @@ class LiberoTask(Task):
     def reset(self, world: World, rng: np.random.Generator) -> None:
         if self.scene is None:
             raise RuntimeError("LiberoTask.reset before build_scene")
+        self.fixture_seed = None
         if self.init == "shipped":
             states = self.init_states()
-            self.scene.set_state(states[self.episode_seed])  # in range: set_episode checked it
+            # in range: set_episode checked it; the fixtures drawn for this state as LIBERO's evaluation draws them
+            self.fixture_seed = SHIPPED_FIXTURE_SEED + self.episode_seed
+            self.scene.set_state(states[self.episode_seed], fixture_seed=self.fixture_seed)
         else:
             self.scene.sample_layout(self.episode_seed, LAYOUT_SPREAD if self.init == "spread" else None)
         self.world = world  # the oracle's skills read it (privileged); rebuilt per episode

@@ -308,6 +308,7 @@ class Task(ABC):
     default_robot: ClassVar[str | None] = None
     init_modes: ClassVar[tuple[str, ...]] = ("sampled",)
     init_note: str | None = None  # why the episode's layout is not the default's (a task whose default depends on the seed)
+    fixture_seed: int | None = None  # the seed the episode's fixtures were drawn with, when the layout's own seed is not it
     world_kind: ClassVar[str] = "workcell"  # "workcell" or "libero"
 
     def build_scene(self, robot, *, timing, scene):

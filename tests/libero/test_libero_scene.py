@@ -194,10 +194,13 @@ def test_spread_layouts_move_the_arrangement_and_leave_libero_regions_as_compile
         type(LAYOUT_SPREAD)(shift_m=-0.1)
 
 
-def test_fixtures_are_placed_the_same_on_every_build_and_shipped_episode(libero_runner):
+def test_fixtures_are_placed_the_same_on_every_build_and_drawn_afresh_for_each_shipped_state(libero_runner):
     """robosuite's constructor lets LIBERO place the fixtures from numpy's global generator: unseeded, the
-    cabinet moved by up to 1.2 cm between processes and the oracle's grasps with it (RELIABILITY row 22)."""
-    from tcot_hybrid.libero.scene import LiberoScene
+    cabinet moved by up to 1.2 cm between processes and the oracle's grasps with it (RELIABILITY row 22). A shipped
+    init state holds no fixture's place: LIBERO's evaluation resets the env (a fresh draw) before it sets the state,
+    and so does this stack, seeded by the state's number: the same state gets the same fixtures whatever ran
+    before, another state other ones, and every joint the state holds is the state's."""
+    from tcot_hybrid.libero.scene import SHIPPED_FIXTURE_SEED, LiberoScene
 
     task, sim = libero_runner.stack.task, libero_runner.stack.sim
     np.random.seed(123)  # whatever the caller's global generator holds
@@ -206,11 +209,27 @@ def test_fixtures_are_placed_the_same_on_every_build_and_shipped_episode(libero_
         np.testing.assert_array_equal(other.model.body_pos, task.scene.built_body_pose[0])
     finally:
         other.close()
+
+    def shipped(seed):
+        task.set_episode(seed=seed, init="shipped")
+        sim.reset(np.random.default_rng(seed))
+        return sim.model.body_pos.copy()
+
+    first = shipped(0)
+    assert task.fixture_seed == SHIPPED_FIXTURE_SEED  # what the episode's record says
+    assert libero_runner.record(0.0)["fixture_seed"] == SHIPPED_FIXTURE_SEED
     task.set_episode(seed=21, init="sampled")
     sim.reset(np.random.default_rng(21))  # a sampled layout moves the fixtures ...
-    task.set_episode(seed=0, init="shipped")
-    sim.reset(np.random.default_rng(0))  # ... and a shipped state puts them back where the build placed them
-    np.testing.assert_array_equal(sim.model.body_pos, task.scene.built_body_pose[0])
+    np.testing.assert_array_equal(shipped(0), first)  # ... and shipped state 0 draws them as before
+    moved = np.abs(shipped(1) - first).max(axis=1)
+    assert 0.0 < moved.max() < 0.03  # another state, another draw, within LIBERO's +-1 cm regions
+    task.set_episode(seed=1, init="shipped")
+    task.scene.set_state(task.init_states()[1], fixture_seed=None)  # the build's placement, as before stop 64
+    np.testing.assert_array_equal(task.scene.model.body_pos, task.scene.built_body_pose[0])
+    np.testing.assert_array_equal(task.scene.data.qpos, task.init_states()[1][1:1 + task.scene.model.nq])
+    task.scene.set_state(task.init_states()[1], fixture_seed=7)
+    np.testing.assert_array_equal(task.scene.data.qpos, task.init_states()[1][1:1 + task.scene.model.nq])
+    shipped(0)  # the fixture's episode back as the other tests found it
 
 
 def test_the_next_episode_of_a_task_reuses_the_scenes_renderer_and_sees_the_same_image():

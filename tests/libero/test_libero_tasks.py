@@ -119,4 +119,5 @@ def test_run_without_init_past_the_shipped_states_records_its_sampled_layout(tmp
     assert "seed 1001 is past the 50 shipped init states" in capsys.readouterr().err
     rec = json.loads((tmp_path / "episode.json").read_text())
     assert rec["init"] == "sampled" and "past the 50 shipped init states" in rec["init_note"]
+    assert "fixture_seed" not in rec  # a sampled layout's fixtures are drawn with its own seed
     assert rec["success"] and rec["max_joint_limit_violation_rad"] == 0.0
