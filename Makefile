@@ -198,7 +198,8 @@ else ifeq ($(LIBERO_PLANNER_EPISODES),10)
 	cp runs/libero/planner_ft.metrics.jsonl docs/libero-planner/train_finetune.metrics.jsonl
 	cp runs/libero/planner_ft.safetensors tcot_hybrid/checkpoints/libero_panda_default.safetensors
 	cp runs/libero/planner_ft.json tcot_hybrid/checkpoints/libero_panda_default.json
-	# this recipe builds no suite model: one left from another build would load ahead of the new default
+	# this recipe builds no suite model: one left from another build would load ahead of the new default (a task
+	# model, libero_panda_tasks_*, stays: the tasks task_models.json routes to it keep planning with it)
 	rm -f $(SUITE_MODEL_FILES) $(SUITE_MODEL_FILES:.safetensors=.json)
 else
 	$(call libero_train_resumable,train_libero50,planner50,train50,)
