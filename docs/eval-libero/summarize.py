@@ -18,7 +18,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 # which code the controller x IK run measured (docs/libero.md)
-CONTROLLERS_IK_WHEN = "commit 145a479, the shipped run's"
+CONTROLLERS_IK_WHEN = "commit 145a479, every state with the fixtures at the scene build's draw (before stop 64)"
 RUNS = {
     "oracle-shipped": "shipped init states (the paper's protocol: all 50 per task), default controller and IK",
     "oracle-sampled": "sampled layouts, reporting seeds 90000-90004 (5 per task)",
