@@ -249,43 +249,37 @@ def keep_row(folder: Path, planner: str, mode: str, commit: str) -> bool:
     return True
 
 
-def _suite_model_folders() -> list[Path]:
-    return sorted(p for p in SUITE_EVAL.glob("*") if p.is_dir()) if SUITE_EVAL.is_dir() else []
+def _model_folders(root: Path) -> list[Path]:
+    """The one-model folders under ``root`` (SUITE_EVAL: one per suite; TASK_EVAL: one per task model)."""
+    return sorted(p for p in root.glob("*") if p.is_dir()) if root.is_dir() else []
 
 
-def _task_model_folders() -> list[Path]:
-    return sorted(p for p in TASK_EVAL.glob("*") if p.is_dir()) if TASK_EVAL.is_dir() else []
+def _one_model_episodes(folder: Path, key: str, allowed: set[str], what: str) -> list[dict]:
+    """Global-only and GLSR episodes of a one-model folder, refused (naming them) if any episode's ``key`` (suite or
+    task) is not in ``allowed`` or they come from more than one checkpoint (as in :func:`_rows`); ``what`` says what
+    the folder must hold."""
+    eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] in ("glsr", "global")]
+    strays = sorted({e[key] for e in eps} - allowed)
+    hashes = sorted({e["checkpoint_hash"] for e in eps})
+    if strays or len(hashes) > 1:
+        raise SystemExit(f"{folder}: holds episodes of {key}s {strays} or of {len(hashes)} checkpoints "
+                         f"({', '.join(map(str, hashes))}); {what} per folder")
+    return eps
 
 
 def _task_model_records() -> dict[str, list[dict]]:
     """Global-only and GLSR episodes of each task-model folder, by checkpoint stem (the folder's name): the tasks
-    task_models.json routes to that model, run with it (one checkpoint per folder, as in :func:`_rows`)."""
-    out = {}
-    for folder in _task_model_folders():
-        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] in ("glsr", "global")]
-        strays = sorted({e["task"] for e in eps} - set(routed_tasks(folder.name)))
-        hashes = sorted({e["checkpoint_hash"] for e in eps})
-        if strays or len(hashes) > 1:
-            raise SystemExit(f"{folder}: holds episodes of tasks not routed to {folder.name} ({', '.join(strays)}) or "
-                             f"of {len(hashes)} checkpoints ({', '.join(map(str, hashes))}); the tasks routed to its "
-                             "model and that model alone per folder")
-        out[folder.name] = eps
-    return out
+    task_models.json routes to that model, run with it."""
+    return {folder.name: _one_model_episodes(folder, "task", set(routed_tasks(folder.name)),
+                                             "the tasks routed to its model and that model alone")
+            for folder in _model_folders(TASK_EVAL)}
 
 
 def _suite_model_records() -> list[dict]:
     """Global-only and GLSR episodes of the suite-model rows: each suite's folder holds that suite's tasks run with
     its own model (one checkpoint per folder, as in :func:`_rows`)."""
-    out = []
-    for folder in _suite_model_folders():
-        eps = [e for e in _records(folder) if e["perturb"] == "none" and e["mode"] in ("glsr", "global")]
-        strays = sorted({e["suite"] for e in eps} - {folder.name})
-        hashes = sorted({e["checkpoint_hash"] for e in eps})
-        if strays or len(hashes) > 1:
-            raise SystemExit(f"{folder}: holds episodes of suites {strays} or of {len(hashes)} checkpoints "
-                             f"({', '.join(map(str, hashes))}); one suite and its own model per folder")
-        out += eps
-    return out
+    return [e for folder in _model_folders(SUITE_EVAL)
+            for e in _one_model_episodes(folder, "suite", {folder.name}, "one suite and its own model")]
 
 
 def _rows() -> dict[tuple[str, str], list[dict]]:
@@ -448,7 +442,7 @@ def table1_lines(by, suite_eps: list[dict], task_eps: dict[str, list[dict]]) -> 
                        f"{worst:.4f} rad" + (f"; {stops} ended on a detector verdict while the task was not done"
                                              if key[1].startswith("glsr") else "") + ".")
     for mode, label, defaults_label in SUITE_MODES:
-        for folder in _suite_model_folders():
+        for folder in _model_folders(SUITE_EVAL):
             eps = [e for e in suite_eps if e["suite"] == folder.name and e["mode"] == mode]
             if not eps:
                 continue
@@ -467,7 +461,7 @@ def table1_lines(by, suite_eps: list[dict], task_eps: dict[str, list[dict]]) -> 
             lines.append(f"- {defaults_label.split(' (')[0]}: {', '.join(own)} from the suite models' rows, the other "
                          f"suites from the four-suite {mode} row ({_checkpoint_note(multi, 'libero_panda_default')})"
                          f"{routed}.")
-    for folder in _task_model_folders():
+    for folder in _model_folders(TASK_EVAL):
         for mode, label, _ in SUITE_MODES:
             eps = [e for e in task_eps.get(folder.name, []) if e["mode"] == mode]
             if eps:
