@@ -9,6 +9,9 @@ Two grasp families, chosen from the object's category name and checked against i
 - **rim pinch** (bowls, ramekins, plates, mugs, moka pots, pans): one finger inside, one outside the wall at
   the object's top ring; the closing axis is radial. Candidates: every collision box of the top ring (a
   mug's handle, off the ring's radius, is not a candidate).
+- **inset rim pinch**: a rim pinch with the TCP moved into the object (RIM_INSETS_M), for a rim with too little
+  room outside it for the outer finger (a bowl against a drawer's wall): the outer finger lands that much nearer
+  the wall and, closing, drags the object by the inset away from whatever was beside it (``Grasp.drag``).
 - **top grasp** (boxes, cans, bottles, books, cartons, everything else): the fingers straddle the top slab
   of the object across its narrowest horizontal width; yaws every 15 degrees, those the open hand spans.
 
@@ -17,7 +20,7 @@ and on its vertical approach) and by how far its wrist turns from the home yaw.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +31,10 @@ ALIGN_SLACK_M = 0.006  # [m] top grasps close on at most this much more than the
 MAX_SPAN_M = 0.072  # [m] widest slab the open hand closes on (8 cm between the pads, minus margin)
 FINGER_BELOW_TCP_M = 0.012  # [m] the finger meshes reach this far past the TCP (fingertip centre)
 APPROACH_DZ = 0.10  # [m] pre-grasp height above a grasp (vertical approach)
+RIM_INSETS_M = (0.01, 0.02)  # [m] how far an inset rim pinch puts the TCP inside the rim (the object's drag)
+# A dragged object may tip or catch: an inset pinch costs as much as one more colliding hand point per cm, so it
+# wins only where the pinch at the rim hits something
+DRAG_COST_PER_M = 100.0
 
 E_Z = np.array([0.0, 0.0, 1.0])
 R_DOWN = np.diag([1.0, -1.0, -1.0])
@@ -99,6 +106,7 @@ class Grasp:
     kind: str
     score: float
     collisions: int
+    drag: np.ndarray = field(default_factory=lambda: np.zeros(3))  # [m] the object's shift as the hand closes
 
 
 def family(category: str) -> str:
@@ -145,6 +153,23 @@ def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
         z = max(tops[i] - depth, lo[2] + FINGER_BELOW_TCP_M + 0.004)
         p = np.array([obj.centre[i, 0], obj.centre[i, 1], z])
         out.append((p, top_down(u)))
+    return out
+
+
+def inset_rim_candidates(obj: Boxes, rims) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(TCP position, rotation, drag) per rim pinch ``rims`` (from :func:`rim_candidates`) and inset in
+    RIM_INSETS_M: the TCP moved that far towards the ring's centre. The fingers close about the TCP, so the outer
+    one pushes the wall to it: the object moves by ``drag`` (the TCP's shift) as the hand closes."""
+    _, centre, _, _ = _ring(obj)
+    out = []
+    for p, R in rims:
+        u = p[:2] - centre[:2]
+        if np.linalg.norm(u) < 1e-6:
+            continue
+        u = u / np.linalg.norm(u)
+        for inset in RIM_INSETS_M:
+            shift = np.array([-u[0] * inset, -u[1] * inset, 0.0])
+            out.append((p + shift, R, shift))
     return out
 
 
@@ -303,10 +328,12 @@ def side_candidates(obj: Boxes, base_pos) -> list[tuple[np.ndarray, np.ndarray]]
 
 
 def score_grasps(candidates, obstacles: Boxes, *, ground_z: float, kind: str, prefer=None) -> list[Grasp]:
-    """Score candidates: hand collisions at the grasp and on its vertical approach (margin 4 mm), points
-    below the ground, wrist turn from the home yaw, and an optional extra cost ``prefer(pos, rot)``."""
+    """Score candidates, (pos, rot) or (pos, rot, drag): hand collisions at the grasp and on its vertical
+    approach (margin 4 mm), points below the ground, wrist turn from the home yaw, the object's drag
+    (DRAG_COST_PER_M) and an optional extra cost ``prefer(pos, rot)``."""
     out = []
-    for pos, rot in candidates:
+    for pos, rot, *rest in candidates:
+        drag = rest[0] if rest else np.zeros(3)
         pts = [hand_points(pos, rot)]
         for dz in (0.03, 0.06, APPROACH_DZ):  # back out along the approach axis
             pts.append(hand_points(pos - rot[:, 2] * dz, rot))
@@ -314,5 +341,7 @@ def score_grasps(candidates, obstacles: Boxes, *, ground_z: float, kind: str, pr
         hits = int(obstacles.contains(pts, margin=0.004).sum()) + int((pts[:, 2] < ground_z).sum())
         yaw = abs(yaw_from_home(rot)) if abs(rot[2, 2]) > 0.5 else 0.0
         extra = prefer(pos, rot) if prefer is not None else 0.0
-        out.append(Grasp(pos=pos, rot=rot, kind=kind, score=hits * 1.0 + 0.3 * yaw + extra, collisions=hits))
+        extra += DRAG_COST_PER_M * float(np.linalg.norm(drag))
+        out.append(Grasp(pos=pos, rot=rot, kind=kind, score=hits * 1.0 + 0.3 * yaw + extra, collisions=hits,
+                         drag=drag))
     return sorted(out, key=lambda g: g.score)

@@ -24,6 +24,7 @@ from tcot_hybrid.libero.grasps import (
     handle_candidates,
     frame,
     hand_points,
+    inset_rim_candidates,
     rim_candidates,
     rot_z,
     score_grasps,
@@ -402,7 +403,8 @@ class PickPlace(LiberoSkill):
                                 f"no rim and no top slab narrower than the open hand")
         obstacles = ctx.obstacles(effects, exclude=(self.obj,))
         parts = parts + tilted(parts, ctx.base_pos)
-        cands = rims + tops + tilted(rims + tops, ctx.base_pos) + parts + side_candidates(obj, ctx.base_pos)
+        cands = (rims + tops + tilted(rims + tops, ctx.base_pos) + parts + side_candidates(obj, ctx.base_pos)
+                 + inset_rim_candidates(obj, rims))
         if kind == "rim" and self._cavity(effects, obstacles) is not None:
             cands += handle_candidates(obj)
         bottom = float(obj.aabb()[0][2])
@@ -475,7 +477,7 @@ class PickPlace(LiberoSkill):
         pool = self._grasp_pool(best, effects)
         first = visible = None
         for g in pool:
-            plans = self._plans_with(world, effects, held, obj_pos, g.pos, g.rot)
+            plans = self._plans_with(world, effects, held, obj_pos, g.pos, g.rot, drag=g.drag)
             for out in plans:
                 if not out["hidden"] and ctx.reachable(self._key_poses(out), moving=self.obj, effects=effects):
                     return out
@@ -508,20 +510,23 @@ class PickPlace(LiberoSkill):
         pool = self._grasp_pool(self.grasp(world, effects), effects)
         obj_pos = self.ctx.point_after(world.pos(self.obj), int(self.ctx.bodies[self.obj][0]), effects)
         for g in pool:
-            if not self._plan_with(world, effects, False, obj_pos, g.pos, g.rot)["hidden"]:
+            if not self._plan_with(world, effects, False, obj_pos, g.pos, g.rot, drag=g.drag)["hidden"]:
                 return g
         return pool[0]
 
-    def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> dict:
+    def _plan_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot, *, drag=None) -> dict:
         """The best-ranked plan for this grasp (:meth:`_plans_with`)."""
-        return self._plans_with(world, effects, held, obj_pos, g_pos, g_rot)[0]
+        return self._plans_with(world, effects, held, obj_pos, g_pos, g_rot, drag=drag)[0]
 
-    def _plans_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot) -> list[dict]:
+    def _plans_with(self, world, effects, held: bool, obj_pos, g_pos, g_rot, *, drag=None) -> list[dict]:
         """Plans that carry the object, held by the grasp (g_pos, g_rot), to its destination: the best-ranked
         releases first (up to PLACE_ALTERNATIVES, so that a release the arm cannot reach gives way to the next
-        one before the grasp does)."""
+        one before the grasp does). ``drag``: how far the closing hand moves the object (an inset rim pinch)."""
         ctx = self.ctx
         obj_boxes = ctx.object_boxes(self.obj, effects)
+        if drag is not None and not held:  # the object as the closed hand holds it
+            obj_boxes = Boxes(obj_boxes.centre + drag, obj_boxes.rot, obj_boxes.half, obj_boxes.geom)
+            obj_pos = obj_pos + drag
         # the object in the hand's frame (rigid while held)
         rel_c = (obj_boxes.centre - g_pos) @ g_rot
         rel_R = np.einsum("ji,njk->nik", g_rot, obj_boxes.rot)

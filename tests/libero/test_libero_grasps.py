@@ -2,7 +2,18 @@
 import numpy as np
 
 from tcot_hybrid.libero.geometry import Boxes
-from tcot_hybrid.libero.grasps import MAX_SPAN_M, handle_candidates, part_candidates, rot_z, top_candidates
+from tcot_hybrid.libero.grasps import (
+    MAX_SPAN_M,
+    RIM_INSETS_M,
+    handle_candidates,
+    hand_points,
+    inset_rim_candidates,
+    part_candidates,
+    rim_candidates,
+    rot_z,
+    score_grasps,
+    top_candidates,
+)
 
 
 def boxes(*specs) -> Boxes:
@@ -71,3 +82,42 @@ def test_an_object_without_a_handle_has_no_handle_grasp():
     bowl = boxes(*[([0.06 * np.cos(a), 0.06 * np.sin(a), 0.03], [0.004, 0.012, 0.03], a)
                    for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)])
     assert handle_candidates(bowl) == []
+
+
+def ring_bowl(radius: float = 0.047, n_wall: int = 16) -> Boxes:
+    """A bowl as LIBERO models it: a ring of thin wall boxes 5 cm tall on a bottom."""
+    walls = [([radius * np.cos(a), radius * np.sin(a), 0.03], [0.004, 0.012, 0.025], a)
+             for a in np.linspace(0, 2 * np.pi, n_wall, endpoint=False)]
+    return boxes(*walls, ([0.0, 0.0, 0.004], [0.03, 0.03, 0.004], 0.0))
+
+
+def test_inset_rim_pinches_sit_inside_the_rim_and_drag_the_bowl_by_the_inset():
+    bowl = ring_bowl()
+    rims = rim_candidates(bowl)
+    insets = inset_rim_candidates(bowl, rims)
+    assert len(insets) == len(rims) * len(RIM_INSETS_M)
+    for (p, R, drag), (p0, R0) in zip(insets, [r for r in rims for _ in RIM_INSETS_M]):
+        assert R is R0
+        assert np.allclose(p - p0, drag) and drag[2] == 0.0
+        assert min(abs(np.linalg.norm(drag) - d) for d in RIM_INSETS_M) < 1e-9
+        assert np.linalg.norm(p[:2]) < np.linalg.norm(p0[:2])  # towards the ring's centre
+        assert abs(R[:, 1] @ np.append(drag[:2] / np.linalg.norm(drag), 0.0)) > 0.99  # along the closing axis
+
+
+def test_a_bowl_against_a_wall_is_pinched_inset_and_dragged_off_it_a_free_bowl_at_its_rim():
+    bowl = ring_bowl()
+    free = score_grasps(rim_candidates(bowl) + inset_rim_candidates(bowl, rim_candidates(bowl)),
+                        boxes(([1.0, 1.0, 0.5], [0.01, 0.01, 0.01], 0.0)), ground_z=-0.01, kind="rim")
+    assert free[0].collisions == 0 and not free[0].drag.any()
+    # a round pen 4.5 cm outside the rim, as tall as the bowl: at the rim the outer finger (4.1-6.2 cm out) lands
+    # on its wall wherever it pinches
+    out = 0.047 + 0.004 + 0.045 + 0.005
+    walls = boxes(*[([out * np.cos(a), out * np.sin(a), 0.0275], [0.005, 0.025, 0.0275], a)
+                    for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)])
+    at_rim = score_grasps(rim_candidates(bowl), walls, ground_z=-0.01, kind="rim")
+    assert min(g.collisions for g in at_rim) > 0
+    best = score_grasps(rim_candidates(bowl) + inset_rim_candidates(bowl, rim_candidates(bowl)), walls,
+                        ground_z=-0.01, kind="rim")[0]
+    assert best.collisions == 0 and np.linalg.norm(best.drag) > 0.0
+    assert not walls.contains(hand_points(best.pos, best.rot), margin=0.004).any()
+    assert best.drag[:2] @ best.pos[:2] < 0  # the bowl is dragged away from the wall its pinch is next to
