@@ -86,6 +86,25 @@ def test_a_rerun_half_done_is_in_progress_and_not_mixed_with_the_run_before(prot
         protocol.PER_SUITE = saved
 
 
+def test_a_row_run_with_one_fixture_draw_never_replaces_one_run_with_each_states_own(protocol, tmp_path, monkeypatch,
+                                                                                        capsys):
+    monkeypatch.setattr(protocol, "PER_SUITE", 2)
+    new = [_episode(s, "t", seed, seed == 0) for s in protocol.SUITES for seed in (0, 1)]
+    old = [{**e, "fixture_seed": None, "success": True} for e in new]  # left in an older checkout's episodes.jsonl
+    (tmp_path / "records.jsonl").write_text("".join(json.dumps({k: e.get(k) for k in protocol.RECORD_FIELDS}) + "\n"
+                                                    for e in new))
+    (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in old))
+    got = protocol._records(tmp_path)
+    assert sorted((r["suite"], r["seed"], r["success"], r["fixture_seed"]) for r in got) == sorted(
+        (e["suite"], e["seed"], e["success"], e["fixture_seed"]) for e in new)
+    assert "8 episodes in episodes.jsonl ran with the fixtures at the build's one draw" in capsys.readouterr().out
+    # the other way round, a run with each state's own draw replaces one with the build's draw
+    (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in new))
+    (tmp_path / "records.jsonl").write_text("".join(json.dumps({k: e.get(k) for k in protocol.RECORD_FIELDS}) + "\n"
+                                                    for e in old))
+    assert sum(r["success"] for r in protocol._records(tmp_path)) == 4
+
+
 def test_restoring_without_saved_progress_restores_nothing(protocol, tmp_path):
     assert protocol.restore_progress(tmp_path) == 0
     assert not (tmp_path / "episodes.jsonl").exists()

@@ -95,8 +95,9 @@ def _read(path: Path) -> list[dict]:
 def _records(folder: Path = EVAL) -> list[dict]:
     """The episodes, trimmed to the fields these tables use. ``tcot eval``'s episodes.jsonl (every event of every
     episode, 50 MB a row, kept out of git: it is what a resumed run reads) is merged into records.jsonl (committed):
-    a row episodes.jsonl holds whole (:func:`_complete_rows`) replaces that row's episodes, and rows only
-    records.jsonl holds (a row run on another machine or before a fresh checkout) are kept."""
+    a row episodes.jsonl holds whole (:func:`_complete_rows`) replaces that row's episodes (unless it ran with the
+    fixtures at the build's one draw and records.jsonl's ran with each state's own), and rows only records.jsonl
+    holds (a row run on another machine or before a fresh checkout) are kept."""
     def key(r: dict) -> tuple:
         return r["task"], r["planner"], r["mode"], r["perturb"], r["seed"]
 
@@ -104,7 +105,17 @@ def _records(folder: Path = EVAL) -> list[dict]:
     full = _complete_rows(_read(folder / "episodes.jsonl"), folder)
     if not full:
         return list(merged.values())
-    merged.update({key(r): r for r in ({k: e.get(k) for k in RECORD_FIELDS} for e in full)})
+    incoming = [{k: e.get(k) for k in RECORD_FIELDS} for e in full]
+    # an episodes.jsonl from an older checkout (its rows run with the build's one fixture draw) never replaces what
+    # was run since with each state's own draw
+    older = [r for r in incoming if r.get("fixture_seed") is None
+             and (merged.get(key(r)) or {}).get("fixture_seed") is not None]
+    if older:
+        print(f"{folder.name}: {len(older)} episodes in episodes.jsonl ran with the fixtures at the build's one draw; "
+              "records.jsonl's runs of them with each state's own draw are kept")
+        stale = {id(r) for r in older}
+        incoming = [r for r in incoming if id(r) not in stale]
+    merged.update({key(r): r for r in incoming})
     _drop_saved_progress(folder, {_run_row(e) for e in full})
     records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
                                                      r["seed"]))
