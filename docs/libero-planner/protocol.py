@@ -105,18 +105,21 @@ def _records(folder: Path = EVAL) -> list[dict]:
     full = _complete_rows(_read(folder / "episodes.jsonl"), folder)
     if not full:
         return list(merged.values())
-    incoming = [{k: e.get(k) for k in RECORD_FIELDS} for e in full]
-    # an episodes.jsonl from an older checkout (its rows run with the build's one fixture draw) never replaces what
-    # was run since with each state's own draw
-    older = [r for r in incoming if r.get("fixture_seed") is None
-             and (merged.get(key(r)) or {}).get("fixture_seed") is not None]
-    if older:
-        print(f"{folder.name}: {len(older)} episodes in episodes.jsonl ran with the fixtures at the build's one draw; "
-              "records.jsonl's runs of them with each state's own draw are kept")
-        stale = {id(r) for r in older}
-        incoming = [r for r in incoming if id(r) not in stale]
-    merged.update({key(r): r for r in incoming})
-    _drop_saved_progress(folder, {_run_row(e) for e in full})
+    # an episodes.jsonl from an older checkout (its rows run with the build's one fixture draw) never replaces a row
+    # run since with each state's own draw: such a row is left out whole, and its saved progress kept
+    rows: dict = defaultdict(list)
+    for e in full:
+        rows[_run_row(e)].append({k: e.get(k) for k in RECORD_FIELDS})
+    merged_rows = set()
+    for row, incoming in sorted(rows.items()):
+        if any(r.get("fixture_seed") is None and (merged.get(key(r)) or {}).get("fixture_seed") is not None
+               for r in incoming):
+            print(f"{folder.name}: the {row[0]} {row[1]} row in episodes.jsonl ran with the fixtures at the build's "
+                  "one draw; records.jsonl's run with each state's own draw is kept")
+            continue
+        merged.update({key(r): r for r in incoming})
+        merged_rows.add(row)
+    _drop_saved_progress(folder, merged_rows)
     records = sorted(merged.values(), key=lambda r: (r["planner"], r["mode"], r["perturb"], r["suite"], r["task"],
                                                      r["seed"]))
     atomic_write_text(folder / "records.jsonl", "".join(json.dumps(r) + "\n" for r in records))

@@ -159,7 +159,8 @@ def rim_candidates(obj: Boxes) -> list[tuple[np.ndarray, np.ndarray]]:
 def inset_rim_candidates(obj: Boxes, rims) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(TCP position, rotation, drag) per rim pinch ``rims`` (from :func:`rim_candidates`) and inset in
     RIM_INSETS_M: the TCP moved that far towards the ring's centre. The fingers close about the TCP, so the outer
-    one pushes the wall to it: the object moves by ``drag`` (the TCP's shift) as the hand closes."""
+    one pushes the wall to it: the object moves by ``drag`` (the TCP's shift) as the hand closes. Each keeps its rim
+    pinch's rotation object: PickPlace.grasp tells rim pinches from top grasps by that identity."""
     _, centre, _, _ = _ring(obj)
     out = []
     for p, R in rims:

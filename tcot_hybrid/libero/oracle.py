@@ -192,7 +192,8 @@ def _aside_spot(ctx: OracleContext, obj: str, step: MoveJoint | None, *,
                           []).grasp(ctx.world, [])
     except PlanningError:  # nothing the hand can hold it by: it is not set aside
         return None
-    hand = hand_points(grasp.pos + np.array([0.0, 0.0, RELEASE_GAP_M]), grasp.rot, closed=True)
+    # (an inset pinch holds the object dragged by grasp.drag: the hand sits that much further the other way)
+    hand = hand_points(grasp.pos - grasp.drag + np.array([0.0, 0.0, RELEASE_GAP_M]), grasp.rot, closed=True)
     best = None
     for radius in (0.10, 0.15, 0.20, 0.25):
         for ang in np.deg2rad(np.arange(0, 360, 30)):

@@ -428,7 +428,8 @@ class PickPlace(LiberoSkill):
             cost = prefer(pos, rot)
             if not (ctx.in_view(pos) and ctx.in_view(pos - rot[:, 2] * 0.02)):
                 cost += 5.0  # plans live in the planner camera's pixels: a grasp it cannot see is refused
-            # the open fingers must not land on the object itself (2 mm slack), except the wall they pinch
+            # the open fingers must not land on the object itself (2 mm slack), except the boxes within 1.5 cm of
+            # the TCP (the wall a rim pinch closes on; an inset pinch's wall lies between the open pads)
             near = np.linalg.norm(obj.centre[:, :2] - pos[:2], axis=1) > 0.015
             if id(rot) in part_ids:  # a part's strip lies between the open fingers: nothing may be under them
                 near[:] = True
@@ -524,7 +525,7 @@ class PickPlace(LiberoSkill):
         one before the grasp does). ``drag``: how far the closing hand moves the object (an inset rim pinch)."""
         ctx = self.ctx
         obj_boxes = ctx.object_boxes(self.obj, effects)
-        if drag is not None and not held:  # the object as the closed hand holds it
+        if drag is not None and drag.any() and not held:  # the object as the closed hand holds it
             obj_boxes = Boxes(obj_boxes.centre + drag, obj_boxes.rot, obj_boxes.half, obj_boxes.geom)
             obj_pos = obj_pos + drag
         # the object in the hand's frame (rigid while held)
