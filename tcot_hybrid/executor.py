@@ -69,6 +69,12 @@ class ExecutorConfig:
                       between points, and a place descent starting 2-3 cm to the side brought a carried cube
                       down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
                       unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
+    grasp_along_approach: a descent onto a grasp that is squared, by a hand leaning 5-45 degrees from straight down,
+                      gets its corner on the line along the hand's approach axis into the grasp (move over, then
+                      come in along the approach) instead of straight above it. The oracle leans far, low grasps
+                      15 or 30 degrees away from the robot and comes in along that axis; squared straight down, a
+                      learned plan brought the leaning fingers down on the plate's rim and closed on nothing
+                      (docs/libero-planner.md, "Grasps along their approach"). False: straight down.
     release_retreat_m: a plan whose last gripper switch is a release and which ends there (its last point within
                       ``RETREAT_NEAR_M`` above the release) gets one more point this far straight up from its last:
                       demonstrations end a few steps after the release, so learned plans do too, and the fingers
@@ -110,6 +116,7 @@ class ExecutorConfig:
     transit_min_horizontal_m: float | None = 0.06
     transit_min_vertical_m: float = 0.02
     switch_min_horizontal_m: float | None = 0.005
+    grasp_along_approach: bool = True
     release_retreat_m: float | None = 0.08
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
@@ -132,18 +139,35 @@ class ExecutorConfig:
             require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
 
 
+APPROACH_LINE_TILT_RAD = (np.deg2rad(5.0), np.deg2rad(45.0))  # hands leaning this far from straight down
+
+
+def _approach_corner(prev: np.ndarray, p: np.ndarray, approach: np.ndarray) -> np.ndarray | None:
+    """Where the line along ``approach`` (the hand's TCP z, unit) into ``p`` reaches ``prev``'s height, for a hand
+    that leans within APPROACH_LINE_TILT_RAD from pointing down; None for any other hand (straight down, or a side
+    grasp's: its corner stays above the grasp)."""
+    tilt = float(np.arccos(np.clip(-approach[2], -1.0, 1.0)))
+    if not APPROACH_LINE_TILT_RAD[0] <= tilt <= APPROACH_LINE_TILT_RAD[1]:
+        return None
+    return p - approach * (float(prev[2] - p[2]) / -float(approach[2]))
+
+
 def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
                     min_horizontal_m: float | None, min_vertical_m: float,
-                    switch_min_horizontal_m: float | None = None, return_source: bool = False):
+                    switch_min_horizontal_m: float | None = None, approach: np.ndarray | None = None,
+                    return_source: bool = False):
     """Waypoints with every diagonal segment split into a sideways and a vertical move, the sideways one at the
     higher end's height: a segment that goes down gets a corner above its end (move over, then lower), one
     that goes up a corner above its start (raise, then move over). Diagonal = more than ``min_horizontal_m``
     sideways (or more than ``switch_min_horizontal_m`` for a segment into or out of a gripper switch) and more
     than ``min_vertical_m`` up or down; None thresholds are off. ``start`` and ``start_closed``
     are the TCP and the gripper command now (the first segment's start). A corner keeps the gripper bit of its
-    segment's start, so grasps and releases still happen at the planned points. Pure function; returns new
-    arrays, and with ``return_source`` also each output point's plan index (a corner's is its segment's end:
-    it takes that waypoint's orientation)."""
+    segment's start, so grasps and releases still happen at the planned points. ``approach`` (N x 3, each
+    point's approach axis, TCP z; None: not used): a descent onto a grasp by a hand leaning 5-45 degrees from
+    straight down gets its corner on the line along that axis into the grasp instead (move over, then come in
+    along the approach, as every demonstration's grasp does), and none when the segment already runs within
+    the threshold of that line. Pure function; returns new arrays, and with ``return_source`` also each output
+    point's plan index (a corner's is its segment's end: it takes that waypoint's orientation)."""
     out_p, out_g, out_src = [], [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
@@ -157,6 +181,13 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
         dz = float(p[2] - prev[2])
         if threshold is not None and horizontal > threshold and abs(dz) > min_vertical_m:
             corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
+            if approach is not None and is_switch and g and dz < 0:  # a descent onto a grasp
+                along = _approach_corner(prev, np.asarray(p, float), np.asarray(approach[i], float))
+                if along is not None:
+                    corner = along if float(np.linalg.norm(along[:2] - prev[:2])) > threshold else None
+        else:
+            corner = None
+        if corner is not None:
             out_p.append(corner)
             out_g.append(prev_g)
             out_src.append(i)
@@ -291,7 +322,8 @@ class MotionExecutor:
             points, grip, source = square_transits(
                 self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
                 min_horizontal_m=cfg.transit_min_horizontal_m, min_vertical_m=cfg.transit_min_vertical_m,
-                switch_min_horizontal_m=cfg.switch_min_horizontal_m, return_source=True)
+                switch_min_horizontal_m=cfg.switch_min_horizontal_m,
+                approach=np.asarray(rots)[:, :, 2] if cfg.grasp_along_approach else None, return_source=True)
             points, grip, last = retreat_after_release(self.sim.gripper_closed_cmd(), points, grip,
                                                        lift_m=cfg.release_retreat_m)
             retreat = len(last) > len(source)

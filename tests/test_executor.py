@@ -130,6 +130,44 @@ def test_moves_into_and_out_of_a_gripper_switch_are_squared_from_a_smaller_offse
     np.testing.assert_array_equal(pts, np.asarray(mid))
 
 
+def _leaning(deg: float) -> np.ndarray:
+    """An approach axis leaning ``deg`` from straight down towards +x."""
+    t = np.radians(deg)
+    return np.array([np.sin(t), 0.0, -np.cos(t)])
+
+
+def _square_onto_grasp(start, grasp, approach_axis):
+    return square_transits(np.asarray(start, float), False, np.asarray([grasp], float), np.array([True]),
+                           min_horizontal_m=H, min_vertical_m=V, switch_min_horizontal_m=0.005,
+                           approach=np.asarray([approach_axis], float))
+
+
+def test_a_leaning_hand_comes_onto_its_grasp_along_its_approach_axis():
+    start, grasp = [0.40, 0.00, 0.20], [0.50, 0.02, 0.05]
+    pts, g = _square_onto_grasp(start, grasp, _leaning(30.0))
+    corner = pts[0]
+    assert len(pts) == 2 and np.isclose(corner[2], start[2])  # moved over at the start's height
+    along = (np.asarray(grasp) - corner) / np.linalg.norm(np.asarray(grasp) - corner)
+    np.testing.assert_allclose(along, _leaning(30.0), atol=1e-9)  # then in along the approach
+    assert g.tolist() == [False, True]  # and the hand closes at the planned point
+    # a descent that already runs along the approach line gets no corner
+    on_line = np.asarray(grasp) - 0.12 * _leaning(30.0)
+    pts, _ = _square_onto_grasp(on_line, grasp, _leaning(30.0))
+    np.testing.assert_array_equal(pts, [grasp])
+
+
+def test_straight_down_and_side_grasps_and_releases_keep_the_corner_above():
+    start, grasp = [0.40, 0.00, 0.20], [0.50, 0.02, 0.05]
+    above = [[0.50, 0.02, 0.20], grasp]
+    for axis in (_leaning(0.0), _leaning(2.0), _leaning(80.0)):  # down, nearly down, a side grasp
+        pts, _ = _square_onto_grasp(start, grasp, axis)
+        np.testing.assert_allclose(pts, above)
+    # a release by a leaning hand is lowered straight down as before
+    pts, _ = square_transits(np.asarray(start), True, np.asarray([grasp]), np.array([False]), min_horizontal_m=H,
+                             min_vertical_m=V, switch_min_horizontal_m=0.005, approach=np.asarray([_leaning(30.0)]))
+    np.testing.assert_allclose(pts, above)
+
+
 def test_switch_threshold_is_checked_and_can_be_switched_off():
     with pytest.raises(ConfigError, match="switch_min_horizontal_m"):
         ExecutorConfig(switch_min_horizontal_m=0.0)
