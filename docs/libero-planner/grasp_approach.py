@@ -36,7 +36,7 @@ TASKS = {
                   "LIVING_ROOM_SCENE2_put_both_the_cream_cheese_box_and_the_butter_in_the_basket",
                   "STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"),
 }
-# (run prefix, label, tcot eval flag at this commit; both ran at e66079a, where the rule was on by default and the
+# (run prefix, label, tcot eval flag at this commit; both ran with the code of 9924e99, the rule on by default, the
 # first row had `--executor.no-grasp-along-approach`: the same two configurations)
 SETTINGS = (("approach_off", "straight down onto every grasp (the default)", ""),
             ("approach_on", "a leaning hand along its approach", " --executor.grasp-along-approach"))
