@@ -69,13 +69,10 @@ class ExecutorConfig:
                       between points, and a place descent starting 2-3 cm to the side brought a carried cube
                       down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
                       unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
-    grasp_along_approach: a descent onto a grasp that is squared, by a hand leaning 5-45 degrees from straight down,
-                      gets its corner on the line along the hand's approach axis into the grasp (move over, then
-                      come in along the approach) instead of straight above it. The oracle leans far, low grasps
-                      15 or 30 degrees away from the robot and comes in along that axis; squared straight down, a
-                      learned plan brought the leaning fingers down on the plate's rim. Off by default: on the 17
-                      tasks with leaning grasps it won 10 and lost 8 of 340 development episodes, under the margin
-                      set before the runs (docs/libero-planner.md, "Grasps along their approach"). True: along.
+    grasp_along_approach: a descent onto a grasp that is squared, by a hand leaning from straight down (within
+                      ``APPROACH_TILT_RANGE_RAD``), gets its corner on the line along the hand's approach axis into
+                      the grasp instead of straight above it, as the oracle's leaning grasps come in. Off by default:
+                      measured, not adopted (docs/libero-planner.md, "Grasps along their approach"). True: along.
     release_retreat_m: a plan whose last gripper switch is a release and which ends there (its last point within
                       ``RETREAT_NEAR_M`` above the release) gets one more point this far straight up from its last:
                       demonstrations end a few steps after the release, so learned plans do too, and the fingers
@@ -140,15 +137,15 @@ class ExecutorConfig:
             require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
 
 
-APPROACH_LINE_TILT_RAD = (np.deg2rad(5.0), np.deg2rad(45.0))  # hands leaning this far from straight down
+APPROACH_TILT_RANGE_RAD = (np.deg2rad(5.0), np.deg2rad(45.0))  # (least, most) lean from straight down
 
 
 def _approach_corner(prev: np.ndarray, p: np.ndarray, approach: np.ndarray) -> np.ndarray | None:
     """Where the line along ``approach`` (the hand's TCP z, unit) into ``p`` reaches ``prev``'s height, for a hand
-    that leans within APPROACH_LINE_TILT_RAD from pointing down; None for any other hand (straight down, or a side
-    grasp's: its corner stays above the grasp)."""
+    whose lean from pointing down lies in APPROACH_TILT_RANGE_RAD, however far back that is; None for any other hand
+    (straight down, or a side grasp's: its corner stays above the grasp)."""
     tilt = float(np.arccos(np.clip(-approach[2], -1.0, 1.0)))
-    if not APPROACH_LINE_TILT_RAD[0] <= tilt <= APPROACH_LINE_TILT_RAD[1]:
+    if not APPROACH_TILT_RANGE_RAD[0] <= tilt <= APPROACH_TILT_RANGE_RAD[1]:
         return None
     return p - approach * (float(prev[2] - p[2]) / -float(approach[2]))
 
@@ -164,10 +161,11 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     than ``min_vertical_m`` up or down; None thresholds are off. ``start`` and ``start_closed``
     are the TCP and the gripper command now (the first segment's start). A corner keeps the gripper bit of its
     segment's start, so grasps and releases still happen at the planned points. ``approach`` (N x 3, each
-    point's approach axis, TCP z; None: not used): a descent onto a grasp by a hand leaning 5-45 degrees from
-    straight down gets its corner on the line along that axis into the grasp instead (move over, then come in
-    along the approach, as every demonstration's grasp does), and none when the segment already runs within
-    the threshold of that line. Pure function; returns new arrays, and with ``return_source`` also each output
+    point's approach axis, TCP z; None: not used): a descent onto a grasp that is squared, by a hand leaning
+    within APPROACH_TILT_RANGE_RAD, gets its corner on the line along that axis into the grasp instead (move over,
+    then come in along the approach, as the oracle's leaning grasps do), and none when that line meets the start's
+    height within the threshold sideways of the start. A descent that starts within the threshold sideways of the
+    grasp is not squared, so it stays straight down. Pure function; returns new arrays, and with ``return_source`` also each output
     point's plan index (a corner's is its segment's end: it takes that waypoint's orientation)."""
     out_p, out_g, out_src = [], [], []
     prev = np.asarray(start, float)

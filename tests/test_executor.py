@@ -150,22 +150,52 @@ def test_a_leaning_hand_comes_onto_its_grasp_along_its_approach_axis():
     along = (np.asarray(grasp) - corner) / np.linalg.norm(np.asarray(grasp) - corner)
     np.testing.assert_allclose(along, _leaning(30.0), atol=1e-9)  # then in along the approach
     assert g.tolist() == [False, True]  # and the hand closes at the planned point
-    # a descent that already runs along the approach line gets no corner
+    # a descent that already runs along the approach line gets no corner; 2 cm off the line, one on it
     on_line = np.asarray(grasp) - 0.12 * _leaning(30.0)
     pts, _ = _square_onto_grasp(on_line, grasp, _leaning(30.0))
     np.testing.assert_array_equal(pts, [grasp])
+    pts, _ = _square_onto_grasp(on_line + [0.0, 0.02, 0.0], grasp, _leaning(30.0))
+    np.testing.assert_allclose(pts, [on_line, grasp], atol=1e-9)
 
 
 def test_straight_down_and_side_grasps_and_releases_keep_the_corner_above():
     start, grasp = [0.40, 0.00, 0.20], [0.50, 0.02, 0.05]
     above = [[0.50, 0.02, 0.20], grasp]
-    for axis in (_leaning(0.0), _leaning(2.0), _leaning(80.0)):  # down, nearly down, a side grasp
+    for axis in (_leaning(0.0), _leaning(2.0), _leaning(50.0), _leaning(80.0)):  # down, nearly down, past 45, side
         pts, _ = _square_onto_grasp(start, grasp, axis)
         np.testing.assert_allclose(pts, above)
+    # a descent of the open hand that grasps nothing there is lowered straight down as before
+    pts, _ = square_transits(np.asarray(start), False, np.asarray([grasp]), np.array([False]), min_horizontal_m=H,
+                             min_vertical_m=V, switch_min_horizontal_m=0.005, approach=np.asarray([_leaning(30.0)]))
+    np.testing.assert_allclose(pts, above)
     # a release by a leaning hand is lowered straight down as before
     pts, _ = square_transits(np.asarray(start), True, np.asarray([grasp]), np.array([False]), min_horizontal_m=H,
                              min_vertical_m=V, switch_min_horizontal_m=0.005, approach=np.asarray([_leaning(30.0)]))
     np.testing.assert_allclose(pts, above)
+
+
+def test_the_executor_takes_each_grasps_approach_axis_from_its_planned_rotation():
+    from scipy.spatial.transform import Rotation
+
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.robot import R_DOWN
+    from tcot_hybrid.run_config import RunConfig
+
+    runner = EpisodeRunner(RunConfig(task="goal_cube_in_bowl", seed=0,
+                                     executor=ExecutorConfig(grasp_along_approach=True)))
+    ex, cam = runner.stack.executor, runner.stack.camera
+    grasp = ex.sim.tcp_pos() + np.array([0.10, 0.05, -0.15])
+    # leaning 25 degrees about an axis that is neither x nor y, so a transposed rotation would lean elsewhere
+    rot = Rotation.from_rotvec(np.radians(25.0) * np.array([0.6, 0.8, 0.0])).as_matrix() @ R_DOWN
+    uv, depth = cam.project(grasp[None])
+    plan = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([True]), camera=cam.name, kind="global",
+                        tcp_rot=rot[None])
+    assert ex.set_plan(plan)
+    corner = ex.points[0]
+    assert len(ex.points) == 2 and np.isclose(corner[2], ex.sim.tcp_pos()[2], atol=1e-9)
+    along = (ex.points[1] - corner) / np.linalg.norm(ex.points[1] - corner)
+    np.testing.assert_allclose(along, rot[:, 2], atol=1e-6)
 
 
 def test_switch_threshold_is_checked_and_can_be_switched_off():
