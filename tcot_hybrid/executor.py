@@ -165,8 +165,8 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
     within APPROACH_TILT_RANGE_RAD, gets its corner on the line along that axis into the grasp instead (move over,
     then come in along the approach, as the oracle's leaning grasps do), and none when that line meets the start's
     height within the threshold sideways of the start. A descent that starts within the threshold sideways of the
-    grasp is not squared, so it stays straight down. Pure function; returns new arrays, and with ``return_source`` also each output
-    point's plan index (a corner's is its segment's end: it takes that waypoint's orientation)."""
+    grasp is not squared, so it stays straight down. Pure function; returns new arrays, and with ``return_source``
+    also each output point's plan index (a corner's is its segment's end: it takes that waypoint's orientation)."""
     out_p, out_g, out_src = [], [], []
     prev = np.asarray(start, float)
     prev_g = bool(start_closed)
