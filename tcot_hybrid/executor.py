@@ -179,11 +179,12 @@ def square_transits(start: np.ndarray, start_closed: bool, points: np.ndarray, g
         horizontal = float(np.linalg.norm(p[:2] - prev[:2]))
         dz = float(p[2] - prev[2])
         if threshold is not None and horizontal > threshold and abs(dz) > min_vertical_m:
-            corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
-            if approach is not None and is_switch and g and dz < 0:  # a descent onto a grasp
-                along = _approach_corner(prev, np.asarray(p, float), np.asarray(approach[i], float))
-                if along is not None:
-                    corner = along if float(np.linalg.norm(along[:2] - prev[:2])) > threshold else None
+            onto_grasp = approach is not None and is_switch and g and dz < 0
+            along = _approach_corner(prev, np.asarray(p, float), np.asarray(approach[i], float)) if onto_grasp else None
+            if along is not None:  # a leaning hand: no corner when the descent already runs along its axis
+                corner = along if float(np.linalg.norm(along[:2] - prev[:2])) > threshold else None
+            else:
+                corner = np.array([p[0], p[1], prev[2]]) if dz < 0 else np.array([prev[0], prev[1], p[2]])
         else:
             corner = None
         if corner is not None:

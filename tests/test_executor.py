@@ -136,8 +136,10 @@ def _leaning(deg: float) -> np.ndarray:
     return np.array([np.sin(t), 0.0, -np.cos(t)])
 
 
-def _square_onto_grasp(start, grasp, approach_axis):
-    return square_transits(np.asarray(start, float), False, np.asarray([grasp], float), np.array([True]),
+def _square_onto_grasp(start, grasp, approach_axis, *, start_closed=False, closes=True):
+    """One descent from ``start`` to ``grasp`` (a grasp when the hand starts open and ``closes``), squared with the
+    5 mm switch threshold and the approach axis given."""
+    return square_transits(np.asarray(start, float), start_closed, np.asarray([grasp], float), np.array([closes]),
                            min_horizontal_m=H, min_vertical_m=V, switch_min_horizontal_m=0.005,
                            approach=np.asarray([approach_axis], float))
 
@@ -164,14 +166,10 @@ def test_straight_down_and_side_grasps_and_releases_keep_the_corner_above():
     for axis in (_leaning(0.0), _leaning(2.0), _leaning(50.0), _leaning(80.0)):  # down, nearly down, past 45, side
         pts, _ = _square_onto_grasp(start, grasp, axis)
         np.testing.assert_allclose(pts, above)
-    # a descent of the open hand that grasps nothing there is lowered straight down as before
-    pts, _ = square_transits(np.asarray(start), False, np.asarray([grasp]), np.array([False]), min_horizontal_m=H,
-                             min_vertical_m=V, switch_min_horizontal_m=0.005, approach=np.asarray([_leaning(30.0)]))
-    np.testing.assert_allclose(pts, above)
-    # a release by a leaning hand is lowered straight down as before
-    pts, _ = square_transits(np.asarray(start), True, np.asarray([grasp]), np.array([False]), min_horizontal_m=H,
-                             min_vertical_m=V, switch_min_horizontal_m=0.005, approach=np.asarray([_leaning(30.0)]))
-    np.testing.assert_allclose(pts, above)
+    # a descent of the open hand that grasps nothing there, and a release, are lowered straight down as before
+    for start_closed in (False, True):
+        pts, _ = _square_onto_grasp(start, grasp, _leaning(30.0), start_closed=start_closed, closes=False)
+        np.testing.assert_allclose(pts, above)
 
 
 def test_the_executor_takes_each_grasps_approach_axis_from_its_planned_rotation():
