@@ -64,8 +64,9 @@ class ExecutorConfig:
                       sampled track). Down: more segments squared, more time spent; up: fewer; None (YAML
                       null) = off. [m]
     switch_min_horizontal_m: the same for the segments into and out of a gripper switch (a grasp or release
-                      point), with this smaller sideways threshold: every demonstration comes straight down
-                      onto a grasp or place and leaves it straight up. Event-spaced global plans have ~10 cm
+                      point), with this smaller sideways threshold: the demonstrations of an upright hand come
+                      straight down onto a grasp or place and leave it straight up (a leaning hand comes in along
+                      its own axis: ``grasp_along_approach``). Event-spaced global plans have ~10 cm
                       between points, and a place descent starting 2-3 cm to the side brought a carried cube
                       down on the bowl's rim. Oracle stops are approached vertically, so their plans stay
                       unsplit. Down: squares smaller offsets; None (YAML null) = off. [m]
@@ -102,6 +103,22 @@ class ExecutorConfig:
                       the ketchup asked a 130-degree turn that IK made by swinging the whole arm over, from where the
                       carry could not reach the basket ("The hand the arm stands nearer"). False: orientations as
                       planned.
+    touch_retry_depth_m: a grasp that retries where the gripper closed on nothing before (its point within
+                      ``touch_retry_radius_m`` sideways of where an empty grasp closed this episode), by a hand
+                      pointing down (within TOUCH_MAX_TILT_RAD), does not close where planned: the hand goes on
+                      down in ``touch_step_m`` steps, at most this far, until the wrist's force sensor reads
+                      ``touch_force_n`` more than at the grasp point (the fingertips met the table or the object),
+                      and closes there (event ``touch``; new plans wait until it has closed, event
+                      ``plan_deferred``). Learned grasps that miss close in the air over the object more often than
+                      beside it (docs/libero-planner.md, "Touching down on a retry"). A robot without a wrist force
+                      sensor closes where planned (event ``touch_unavailable``). Up: deeper search, more time;
+                      None (YAML null) = off. [m]
+    touch_retry_radius_m: how near an empty grasp's closing point a grasp counts as its retry [m]. Up: more grasps
+                      touch down.
+    touch_step_m:     the touch's step down [m]: the force is read every control tick, so this bounds the speed of
+                      the descent, not where it stops.
+    touch_force_n:    how much more than at the grasp point the wrist must feel to have touched [N]. Down: stops
+                      on the hand's own acceleration; up: presses harder before it closes.
     """
 
     blend_time_s: float = 0.15
@@ -118,6 +135,10 @@ class ExecutorConfig:
     release_retreat_m: float | None = 0.08
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
+    touch_retry_depth_m: float | None = None
+    touch_retry_radius_m: float = 0.06
+    touch_step_m: float = 0.01
+    touch_force_n: float = 8.0
 
     def __post_init__(self) -> None:
         for name in ("blend_time_s", "reach_timeout_s", "gripper_settle_s", "transit_min_vertical_m"):
@@ -135,6 +156,13 @@ class ExecutorConfig:
         require_positive("resync_tol_rad", self.resync_tol_rad)
         if self.reflex_tracking_rad is not None:  # None (YAML null) switches the reflex off
             require_positive("reflex_tracking_rad (or null: off)", self.reflex_tracking_rad)
+        if self.touch_retry_depth_m is not None:
+            require_positive("touch_retry_depth_m (or null: off)", self.touch_retry_depth_m)
+        for name in ("touch_retry_radius_m", "touch_step_m", "touch_force_n"):
+            require_positive(name, getattr(self, name))
+
+
+TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
 
 
 APPROACH_TILT_RANGE_RAD = (np.deg2rad(5.0), np.deg2rad(45.0))  # (least, most) lean from straight down
@@ -275,7 +303,7 @@ class MotionExecutor:
         self.grip: np.ndarray = np.zeros(0, bool)
         self.point_source: np.ndarray = np.zeros(0, int)  # plan waypoint index of each point
         self.index = -1
-        self.phase = "idle"  # idle | move | settle | done
+        self.phase = "idle"  # idle | move | touch | settle | done | home
         self._phase_until = 0.0
         self._arrived_at: float | None = None  # when the reference reached the current stop point [s]
         self._waiting_at: np.ndarray | None = None  # that stop point [m]
@@ -289,6 +317,11 @@ class MotionExecutor:
         self.tracking_reflexes = 0
         self.tracking_err_max = 0.0
         self.grasp_tcp_z: float | None = None  # TCP height where a plan last closed the gripper [m] (None: open)
+        self._closed_at: np.ndarray | None = None  # the TCP where it closed [m, world] (None: open)
+        self.empty_grasp_points: list[np.ndarray] = []  # where grasps that held nothing closed, this episode [m]
+        self._touch_depth = 0.0  # how far below its grasp point the touching hand is asked [m]
+        self._touch_force0: np.ndarray | None = None  # the wrist force where the touch began [N]
+        self._touch_unavailable_said = False
         # put_down_before_release of the closed stretch the active plan is carrying out (None: open, the plan never
         # opens the hand again, or another plan took over from the one that closed it)
         self.closed_put_down_m: float | None = None
@@ -307,7 +340,11 @@ class MotionExecutor:
 
     # --- plans ------------------------------------------------------------------------------------
     def set_plan(self, plan: WaypointPlan) -> bool:
-        """Lift and adopt a plan; a plan that cannot be lifted is rejected and the old one kept."""
+        """Lift and adopt a plan; a plan that cannot be lifted is rejected and the old one kept, as is every plan
+        while the hand touches down on a retried grasp (``touch_retry_depth_m``)."""
+        if self.phase == "touch":
+            self.event("plan_deferred", reason="touching down", plan_kind=plan.kind, step=plan.step)
+            return False
         try:
             points = lift_waypoints(plan.uv_px, plan.depth_m, plan.lift_camera(self.camera), config=self.lift_config)
         except LiftError as exc:
@@ -446,6 +483,9 @@ class MotionExecutor:
             if t >= self._phase_until:
                 self._next()
             return
+        if self.phase == "touch":
+            self._touch_down(t)
+            return
         if self.phase != "move":
             return
         i = self.index
@@ -466,16 +506,77 @@ class MotionExecutor:
                 self.event("unreachable_grasp", waypoint=i, tcp_err_m=round(err, 4),
                            target=[round(float(v), 4) for v in self.points[i]])
         if bool(self.grip[i]) != self.sim.gripper_closed_cmd():
-            self.sim.set_gripper(bool(self.grip[i]))
-            self.grasp_tcp_z = float(self.sim.tcp_pos()[2]) if self.grip[i] else None
-            self.closed_put_down_m = put_down_before_release(self.points, self.grip, i) if self.grip[i] else None
-            self.closes += bool(self.grip[i])
-            self.releases += not self.grip[i]
-            self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
-            self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
-            self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
+            if self.grip[i] and self._retries_empty_grasp(i):
+                self._start_touch()
+                return
+            self._switch_gripper(i, t)
         else:
             self.phase = "done"
+
+    def _switch_gripper(self, i: int, t: float) -> None:
+        """Stop ``i``'s gripper command, then settle before the next waypoint."""
+        self.sim.set_gripper(bool(self.grip[i]))
+        self._closed_at = self.sim.tcp_pos() if self.grip[i] else None
+        self.grasp_tcp_z = float(self._closed_at[2]) if self.grip[i] else None
+        self.closed_put_down_m = put_down_before_release(self.points, self.grip, i) if self.grip[i] else None
+        self.closes += bool(self.grip[i])
+        self.releases += not self.grip[i]
+        self.event("gripper", closed=bool(self.grip[i]), waypoint=i)
+        self._arrived_at = self._waiting_at = None  # this stop is done; the next one has its own wait
+        self.phase, self._phase_until = "settle", t + self.config.gripper_settle_s
+
+    def _retries_empty_grasp(self, i: int) -> bool:
+        """Whether grasp ``i`` touches down first (``touch_retry_depth_m``): a hand pointing down, near where a
+        grasp closed on nothing this episode, on a robot with a wrist force sensor."""
+        cfg = self.config
+        if cfg.touch_retry_depth_m is None or not self.empty_grasp_points:
+            return False
+        if float(self.rots[i][2, 2]) > -np.cos(TOUCH_MAX_TILT_RAD):  # the approach axis (TCP z) down: -1
+            return False
+        near = np.linalg.norm(np.asarray(self.empty_grasp_points)[:, :2] - self.points[i][:2], axis=1)
+        if near.min() > cfg.touch_retry_radius_m:
+            return False
+        if self.sim.wrist_force() is None:
+            if not self._touch_unavailable_said:
+                self._touch_unavailable_said = True
+                self.event("touch_unavailable", waypoint=i, reason="the robot has no wrist force sensor")
+            return False
+        return True
+
+    def _start_touch(self) -> None:
+        self.phase, self._touch_depth, self._touch_force0 = "touch", 0.0, self.sim.wrist_force()
+        self._touch_step()
+
+    def _touch_step(self) -> bool:
+        """Ask the hand ``touch_step_m`` further down (same orientation); False when that is past
+        ``touch_retry_depth_m`` or IK cannot get there."""
+        cfg, i = self.config, self.index
+        depth = self._touch_depth + cfg.touch_step_m
+        if depth > cfg.touch_retry_depth_m + 1e-9:
+            return False
+        T = self.sim.T_base_world
+        below = self.points[i] - np.array([0.0, 0.0, depth])
+        target = IKTarget(pos=T[:3, :3] @ below + T[:3, 3], rot=self.ik_target(i, self._hand_turned).rot)
+        res = self.ik.solve(target, self._ik_seed)
+        if not res.converged:
+            return False
+        self._touch_depth, self._ik_seed = depth, res.q
+        self._set_target(res.q, i)
+        return True
+
+    def _touch_down(self, t: float) -> None:
+        """One control tick of a touch: close where the wrist feels the touch, or at the touch's bottom."""
+        i = self.index
+        pressed = float(np.linalg.norm(self.sim.wrist_force() - self._touch_force0))
+        touched = pressed >= self.config.touch_force_n
+        if touched:
+            self._brake_inside_limits(self.sim.q, self.sim.qd, "touch")
+            self._ik_seed = self.sim.q
+        elif not self.smoother.done or self._touch_step():
+            return
+        self.event("touch", waypoint=i, touched=touched, force_n=round(pressed, 2),
+                   below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
+        self._switch_gripper(i, t)
 
     def _next(self) -> None:
         if self.index + 1 < len(self.points):
@@ -493,7 +594,8 @@ class MotionExecutor:
     def reset_after_scene_reset(self) -> None:
         """The simulator was reset (arm at home): drop the plan and restart the reference there."""
         self._drop_plan()
-        self.phase, self.grasp_tcp_z = "idle", None
+        self.phase, self.grasp_tcp_z, self._closed_at = "idle", None, None
+        self.empty_grasp_points = []  # the objects stand where they started again
         self.smoother.reset(self.sim.q)
         self._ik_seed = self.sim.q
         self._hand_turned = False
@@ -542,7 +644,9 @@ class MotionExecutor:
     def open_empty_gripper(self, opening_m: float) -> None:
         """The closed gripper holds nothing (its fingers met): open it, so the next plan starts from an open hand."""
         self.sim.set_gripper(False)
-        self.grasp_tcp_z = self.closed_put_down_m = None
+        if self._closed_at is not None:
+            self.empty_grasp_points.append(self._closed_at)
+        self.grasp_tcp_z = self.closed_put_down_m = self._closed_at = None
         self.event("gripper", closed=False, reason="grasp_empty", opening_m=round(opening_m, 5))
         self.phase = "done"  # the plan's remaining stops assumed an object in the hand; a new plan follows
 

@@ -71,6 +71,7 @@ class Simulation:
                            gripper=tuple((int(a), sign * robot.gripper_open, sign * robot.gripper_closed)
                                          for a, sign in zip(self._grip_acts, self._grip_sign)))
         self.ee_site = m.site(robot.ee_site).id
+        self._wrist_force_adr = _wrist_force_sensor(m, robot.arm_joints[-1])
         self.T_world_base = base_transform(robot, m, self.data)
         self.T_base_world = np.linalg.inv(self.T_world_base)
         self._object_bodies = np.array([m.body(o.body).id for o in self.objects.values()], dtype=int)
@@ -165,6 +166,13 @@ class Simulation:
     def gripper_closed_cmd(self) -> bool:
         return bool(self.data.ctrl[self.gripper_act] == self.robot.gripper_closed)
 
+    def wrist_force(self) -> np.ndarray | None:
+        """The wrist force sensor's reading [N, in its site's frame] (a force sensor between the arm and the hand, as
+        robosuite's ``gripper0_force_ee``), or None when the robot has none."""
+        if self._wrist_force_adr is None:
+            return None
+        return self.data.sensordata[self._wrist_force_adr:self._wrist_force_adr + 3].copy()
+
     def gripper_opening_m(self) -> float:
         """Measured finger opening [m]: the finger joints' travel from closed (joint position 0 on the bundled
         grippers), summed (proprioception)."""
@@ -217,6 +225,21 @@ def _pose(xpos, xmat) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = np.asarray(xmat).reshape(3, 3), xpos
     return T
+
+
+def _wrist_force_sensor(model: mujoco.MjModel, last_arm_joint: str) -> int | None:
+    """Address in ``sensordata`` of the first force sensor on a site carried by the arm's last joint (the hand's
+    force/torque sensor, between the arm and the fingers), or None."""
+    wrist = int(model.jnt_bodyid[model.joint(last_arm_joint).id])
+    for i in range(model.nsensor):
+        if model.sensor_type[i] != mujoco.mjtSensor.mjSENS_FORCE or model.sensor_objtype[i] != mujoco.mjtObj.mjOBJ_SITE:
+            continue
+        b = int(model.site_bodyid[model.sensor_objid[i]])
+        while b not in (0, wrist):
+            b = int(model.body_parentid[b])
+        if b == wrist:
+            return int(model.sensor_adr[i])
+    return None
 
 
 def robot_root_body(model: mujoco.MjModel, first_arm_joint: str) -> int:

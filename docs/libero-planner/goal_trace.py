@@ -23,11 +23,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, required=True)
     ap.add_argument("--planner", default="learned", choices=("learned", "oracle"))
     ap.add_argument("--mode", default="global", choices=("global", "glsr"))
+    ap.add_argument("--checkpoint", help="the learned planner's checkpoint (default: the task's shipped model)")
     ap.add_argument("--every", type=int, default=5, help="planner steps between rows")
     ap.add_argument("--since", type=int, default=0, help="first planner step traced")
     ap.add_argument("--until", type=int, default=200, help="last planner step traced")
     a = ap.parse_args()
-    runner = EpisodeRunner(dev_runs.episode_config(a.task, a.seed, a.planner, a.mode))
+    runner = EpisodeRunner(dev_runs.episode_config(a.task, a.seed, a.planner, a.mode, a.checkpoint))
     scene = runner.stack.task.scene
     env, m = scene.env, scene.model
     goals = env.parsed_problem["goal_state"]
