@@ -163,6 +163,7 @@ class ExecutorConfig:
 
 
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
+TOUCH_SLOWER = 4.0  # a touch's steps are planned this many times slower than a move (it must not strike what it meets)
 
 
 APPROACH_TILT_RANGE_RAD = (np.deg2rad(5.0), np.deg2rad(45.0))  # (least, most) lean from straight down
@@ -462,9 +463,9 @@ class MotionExecutor:
         rot = T[:3, :3] @ self.rots[i]
         return IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=rot @ _HALF_TURN if turned else rot)
 
-    def _set_target(self, q: np.ndarray, i: int) -> None:
+    def _set_target(self, q: np.ndarray, i: int, *, slower: float = 1.0) -> None:
         try:
-            self.smoother.set_target(q)
+            self.smoother.set_target(q, slower=slower)
         except TrajectoryError as exc:  # e.g. retargeted while moving fast toward a joint limit
             self.event("reference_brake", waypoint=i, reason=str(exc))
             ref = self.smoother.reference  # stop inside the limits; the waypoint logic moves on from rest
@@ -561,7 +562,7 @@ class MotionExecutor:
         if not res.converged:
             return False
         self._touch_depth, self._ik_seed = depth, res.q
-        self._set_target(res.q, i)
+        self._set_target(res.q, i, slower=TOUCH_SLOWER)
         return True
 
     def _touch_down(self, t: float) -> None:

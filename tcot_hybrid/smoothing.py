@@ -405,13 +405,18 @@ class JointSmoother:
         self._install([phase], state)
         return SegmentInfo(phase.duration, phase.duration, phase.duration, True, name, time.perf_counter() - start, 0.0)
 
-    def set_target(self, q_target: np.ndarray, qd_target: np.ndarray | None = None) -> SegmentInfo:
+    def set_target(self, q_target: np.ndarray, qd_target: np.ndarray | None = None, *, slower: float = 1.0
+                   ) -> SegmentInfo:
         """Retarget online: a new segment from the current reference state to ``q_target`` [rad].
 
         ``qd_target`` [rad/s] (default zero) must be within the planning velocity limits; the
-        reference then comes to rest after passing the target. Raises TrajectoryError (reference
-        unchanged) for invalid input, Ruckig errors, or segments that would leave [q_min, q_max].
+        reference then comes to rest after passing the target. ``slower`` (>= 1): the move planned that many times
+        slower (the planning limits scaled v / k, a / k^2, j / k^3), e.g. a guarded move that must not strike what it
+        meets. Raises TrajectoryError (reference unchanged) for invalid input, Ruckig errors, or segments that would
+        leave [q_min, q_max].
         """
+        if not (isinstance(slower, (int, float)) and not isinstance(slower, bool) and slower >= 1.0):
+            raise TrajectoryError(f"slower must be a number >= 1 (how many times slower a move is planned), got {slower!r}")
         self._require_started()
         target = _vector("q_target", q_target, self.dof)
         bad = np.flatnonzero((target < self.q_min) | (target > self.q_max))
@@ -440,8 +445,8 @@ class JointSmoother:
             state, t0 = brake.end, brake.duration
         brake_s = t0
 
-        candidate, move, synchronized, name = self._move(phases, t0, state, target, target_v, 1.0)
-        stretch, ratio = 1.0, 0.0
+        candidate, move, synchronized, name = self._move(phases, t0, state, target, target_v, slower)
+        stretch, ratio = slower, 0.0
         if self._torques is not None:
             ratio = self._torque_ratio(move)
             while ratio > 1.0 and stretch < self.MAX_TIME_STRETCH:

@@ -424,3 +424,48 @@ def test_put_down_before_release_measures_the_closed_stretch(z, grip, closed_at,
     points = np.column_stack([np.zeros(len(z)), np.zeros(len(z)), z])
     got = put_down_before_release(points, np.array(grip, bool), closed_at)
     assert got == pytest.approx(expect) if expect is not None else got is None
+
+
+@pytest.mark.parametrize("field, value", [("touch_retry_depth_m", 0.0), ("touch_retry_depth_m", -0.05),
+                                          ("touch_retry_radius_m", 0.0), ("touch_step_m", -0.01),
+                                          ("touch_force_n", 0.0), ("touch_force_n", float("nan"))])
+def test_touch_settings_are_checked(field, value):
+    with pytest.raises(ConfigError, match=field):
+        ExecutorConfig(**{field: value})
+
+
+def test_an_empty_grasp_is_remembered_until_the_scene_is_reset_and_a_hand_without_a_force_sensor_closes_as_planned():
+    """The workcell Panda has no wrist force sensor: a retried grasp closes where planned, and says once why it did
+    not touch down (``touch_unavailable``)."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(touch_retry_depth_m=0.08)))
+    r.settle()
+    ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+    assert sim.wrist_force() is None
+    _, R = ex.dyn.ee_pose()
+    grasp = sim.tcp_pos() + np.array([0.0, 0.0, -0.05])
+
+    def close_at_grasp() -> np.ndarray:
+        uv, depth = cam.project(grasp[None])
+        assert ex.set_plan(WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([True]), camera=cam.name,
+                                        kind="local", tcp_rot=R[None]))
+        for _ in range(400):
+            ex.tick()
+            if sim.gripper_closed_cmd():
+                return sim.tcp_pos()
+        raise AssertionError("the gripper never closed")
+
+    first = close_at_grasp()
+    assert ex.empty_grasp_points == []
+    ex.open_empty_gripper(0.001)  # as GLSR's empty-grasp check does
+    assert len(ex.empty_grasp_points) == 1
+    np.testing.assert_allclose(ex.empty_grasp_points[0], first, atol=1e-3)  # read one control tick apart
+    second = close_at_grasp()
+    said = [e for e in ex.events if e["kind"] == "touch_unavailable"]
+    assert len(said) == 1 and not [e for e in ex.events if e["kind"] == "touch"]
+    assert np.linalg.norm(second - grasp) < ex.config.reach_tol_m + 0.002
+    ex.reset_after_scene_reset()
+    assert ex.empty_grasp_points == []
