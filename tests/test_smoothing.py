@@ -592,3 +592,27 @@ def test_torque_model_misuse_is_refused():
     off = make(SmoothingConfig(torque_fraction=None), torques=lambda q, qd, qdd: 1 / 0)
     off.reset(_at(0.4))
     assert off.set_target(_at(0.5)).time_stretch == 1.0, "torque_fraction None: no check"
+
+
+def test_a_move_planned_k_times_slower_takes_k_times_as_long_and_keeps_within_the_scaled_limits():
+    q0 = (Q_MIN + Q_MAX) / 2
+    q1 = q0 + 0.05
+    base = make()
+    base.reset(q0)
+    normal = base.set_target(q1).duration_s
+    s = make()
+    s.reset(q0)
+    slow = s.set_target(q1, slower=4.0).duration_s
+    assert slow == pytest.approx(4.0 * normal, rel=0.02)
+    refs = run_to_end(s)
+    np.testing.assert_allclose(refs[-1].q, q1, atol=1e-9)
+    assert max(np.abs(r.qd).max() for r in refs) <= (s.v_plan / 4.0).max() + 1e-9
+
+
+@pytest.mark.parametrize("slower", [0.5, 0.0, -2.0, float("nan"), True, "2"])
+def test_a_move_cannot_be_planned_faster_or_by_a_non_number(slower):
+    s = make()
+    q0 = (Q_MIN + Q_MAX) / 2
+    s.reset(q0)
+    with pytest.raises(TrajectoryError, match="slower"):
+        s.set_target(q0 + 0.05, slower=slower)
