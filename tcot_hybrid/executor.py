@@ -17,7 +17,7 @@ import numpy as np
 
 from tcot_hybrid.camera import CameraModel
 from tcot_hybrid.config import require_nonnegative, require_positive
-from tcot_hybrid.errors import LiftError, TcotError, TrajectoryError
+from tcot_hybrid.errors import ConfigError, LiftError, TcotError, TrajectoryError
 from tcot_hybrid.ik import IKSolver, IKTarget, rotation_angle
 from tcot_hybrid.lift import LiftConfig, lift_waypoints
 from tcot_hybrid.plan import WaypointPlan
@@ -108,15 +108,16 @@ class ExecutorConfig:
                       pointing down (within TOUCH_MAX_TILT_RAD), does not close where planned: the hand goes on
                       down in ``touch_step_m`` steps, at most this far, until the wrist's force sensor reads
                       ``touch_force_n`` more than at the grasp point (the fingertips met the table or the object),
-                      and closes there (event ``touch``; new plans wait until it has closed, event
-                      ``plan_deferred``). Learned grasps that miss close in the air over the object more often than
+                      and closes there (event ``touch``; plans that come meanwhile are refused, event
+                      ``plan_refused``: GLSR asks again at its next period). Learned grasps that miss close in the air over the object more often than
                       beside it (docs/libero-planner.md, "Touching down on a retry"). A robot without a wrist force
                       sensor closes where planned (event ``touch_unavailable``). Up: deeper search, more time;
                       None (YAML null) = off. [m]
     touch_retry_radius_m: how near an empty grasp's closing point a grasp counts as its retry [m]. Up: more grasps
                       touch down.
-    touch_step_m:     the touch's step down [m]: the force is read every control tick, so this bounds the speed of
-                      the descent, not where it stops.
+    touch_step_m:     the touch's step down [m], each from rest to rest and TOUCH_SLOWER times slower than a move
+                      (a touch that meets nothing takes about 6 s for 8 cm): the force is read every control tick,
+                      so this sets the descent's pace, not where it stops. At most ``touch_retry_depth_m``.
     touch_force_n:    how much more than at the grasp point the wrist must feel to have touched [N]. Down: stops
                       on the hand's own acceleration; up: presses harder before it closes.
     """
@@ -160,6 +161,10 @@ class ExecutorConfig:
             require_positive("touch_retry_depth_m (or null: off)", self.touch_retry_depth_m)
         for name in ("touch_retry_radius_m", "touch_step_m", "touch_force_n"):
             require_positive(name, getattr(self, name))
+        if self.touch_retry_depth_m is not None and self.touch_step_m > self.touch_retry_depth_m:
+            raise ConfigError(f"touch_step_m = {self.touch_step_m} m is deeper than touch_retry_depth_m = "
+                              f"{self.touch_retry_depth_m} m: a touch would not take a single step; choose a step "
+                              f"<= the depth")
 
 
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
@@ -322,6 +327,7 @@ class MotionExecutor:
         self.empty_grasp_points: list[np.ndarray] = []  # where grasps that held nothing closed, this episode [m]
         self._touch_depth = 0.0  # how far below its grasp point the touching hand is asked [m]
         self._touch_force0: np.ndarray | None = None  # the wrist force where the touch began [N]
+        self._touch_end: str | None = None  # why the touch can go no further down (None: it still can)
         self._touch_unavailable_said = False
         # put_down_before_release of the closed stretch the active plan is carrying out (None: open, the plan never
         # opens the hand again, or another plan took over from the one that closed it)
@@ -342,9 +348,9 @@ class MotionExecutor:
     # --- plans ------------------------------------------------------------------------------------
     def set_plan(self, plan: WaypointPlan) -> bool:
         """Lift and adopt a plan; a plan that cannot be lifted is rejected and the old one kept, as is every plan
-        while the hand touches down on a retried grasp (``touch_retry_depth_m``)."""
+        while the hand touches down on a retried grasp (``touch_retry_depth_m``: refused, not queued)."""
         if self.phase == "touch":
-            self.event("plan_deferred", reason="touching down", plan_kind=plan.kind, step=plan.step)
+            self.event("plan_refused", reason="touching down", plan_kind=plan.kind, step=plan.step)
             return False
         try:
             points = lift_waypoints(plan.uv_px, plan.depth_m, plan.lift_camera(self.camera), config=self.lift_config)
@@ -456,12 +462,14 @@ class MotionExecutor:
         self._ik_seed = res.q
         self._set_target(res.q, i)
 
-    def ik_target(self, i: int, turned: bool) -> IKTarget:
+    def ik_target(self, i: int, turned: bool, *, below_m: float = 0.0) -> IKTarget:
         """Waypoint ``i`` as IK is asked it: in the robot's base frame (plans live in the world frame; identity in
-        the workcell), its hand turned half a turn about the approach axis when ``turned``."""
+        the workcell), its hand turned half a turn about the approach axis when ``turned``, ``below_m`` straight
+        down (world z) from the waypoint (a touch)."""
         T = self.sim.T_base_world
         rot = T[:3, :3] @ self.rots[i]
-        return IKTarget(pos=T[:3, :3] @ self.points[i] + T[:3, 3], rot=rot @ _HALF_TURN if turned else rot)
+        pos = self.points[i] - np.array([0.0, 0.0, below_m])
+        return IKTarget(pos=T[:3, :3] @ pos + T[:3, 3], rot=rot @ _HALF_TURN if turned else rot)
 
     def _set_target(self, q: np.ndarray, i: int, *, slower: float = 1.0) -> None:
         try:
@@ -515,7 +523,7 @@ class MotionExecutor:
             self.phase = "done"
 
     def _switch_gripper(self, i: int, t: float) -> None:
-        """Stop ``i``'s gripper command, then settle before the next waypoint."""
+        """Switch the gripper to waypoint ``i``'s command, then settle before the next waypoint."""
         self.sim.set_gripper(bool(self.grip[i]))
         self._closed_at = self.sim.tcp_pos() if self.grip[i] else None
         self.grasp_tcp_z = float(self._closed_at[2]) if self.grip[i] else None
@@ -545,38 +553,46 @@ class MotionExecutor:
         return True
 
     def _start_touch(self) -> None:
+        # the baseline is the wrist as the hand stands at the grasp point: a hand already pressing there feels more
         self.phase, self._touch_depth, self._touch_force0 = "touch", 0.0, self.sim.wrist_force()
-        self._touch_step()
+        self._touch_end = self._touch_step()
 
-    def _touch_step(self) -> bool:
-        """Ask the hand ``touch_step_m`` further down (same orientation); False when that is past
-        ``touch_retry_depth_m`` or IK cannot get there."""
+    def _touch_step(self) -> str | None:
+        """Ask the hand ``touch_step_m`` further down (same orientation, TOUCH_SLOWER times slower than a move); or
+        why it cannot: "bottom" (past ``touch_retry_depth_m``), "ik" (IK does not reach it, or refuses the target)."""
         cfg, i = self.config, self.index
         depth = self._touch_depth + cfg.touch_step_m
         if depth > cfg.touch_retry_depth_m + 1e-9:
-            return False
-        T = self.sim.T_base_world
-        below = self.points[i] - np.array([0.0, 0.0, depth])
-        target = IKTarget(pos=T[:3, :3] @ below + T[:3, 3], rot=self.ik_target(i, self._hand_turned).rot)
-        res = self.ik.solve(target, self._ik_seed)
+            return "bottom"
+        target = self.ik_target(i, self._hand_turned, below_m=depth)
+        try:
+            res = self.ik.solve(target, self._ik_seed)
+        except TcotError as exc:
+            self.event("ik_error", waypoint=i, reason=str(exc))
+            return "ik"
         if not res.converged:
-            return False
+            return "ik"
         self._touch_depth, self._ik_seed = depth, res.q
         self._set_target(res.q, i, slower=TOUCH_SLOWER)
-        return True
+        return None
 
     def _touch_down(self, t: float) -> None:
-        """One control tick of a touch: close where the wrist feels the touch, or at the touch's bottom."""
+        """One control tick of a touch: close where the wrist feels the touch, or where the touch can go no further
+        (event ``touch``: ``ended`` "touched", "bottom" or "ik")."""
         i = self.index
         pressed = float(np.linalg.norm(self.sim.wrist_force() - self._touch_force0))
         touched = pressed >= self.config.touch_force_n
         if touched:
             self._brake_inside_limits(self.sim.q, self.sim.qd, "touch")
             self._ik_seed = self.sim.q
-        elif not self.smoother.done or self._touch_step():
-            return
-        self.event("touch", waypoint=i, touched=touched, force_n=round(pressed, 2),
-                   below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
+        elif self._touch_end is None:
+            if not self.smoother.done:
+                return
+            self._touch_end = self._touch_step()
+            if self._touch_end is None:
+                return
+        self.event("touch", waypoint=i, touched=touched, ended="touched" if touched else self._touch_end,
+                   force_n=round(pressed, 2), below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
         self._switch_gripper(i, t)
 
     def _next(self) -> None:

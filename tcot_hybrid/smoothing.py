@@ -26,6 +26,7 @@ a finite state.
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
@@ -97,8 +98,8 @@ class SegmentInfo(NamedTuple):
     compute_s:           wall time spent computing the segment [s]
     limit_excursion_rad: largest excursion beyond [q_min, q_max] along the segment [rad]; always 0 for
                          set_target (refused otherwise), may be > 0 for brake() from a bad state
-    time_stretch:        set_target with a torque model: how many times slower than the planning limits
-                         allow the move was made so its torques fit (1 = not slowed)
+    time_stretch:        set_target: how many times slower than the planning limits allow the move was made,
+                         as asked (``slower``) and, with a torque model, so its torques fit (1 = not slowed)
     torque_ratio:        the move's largest |tau| / (torque_fraction * tau_max) over its samples and joints
                          (at most 1 unless even the slowest allowed stretch did not fit); 0 without a model
     """
@@ -415,8 +416,9 @@ class JointSmoother:
         meets. Raises TrajectoryError (reference unchanged) for invalid input, Ruckig errors, or segments that would
         leave [q_min, q_max].
         """
-        if not (isinstance(slower, (int, float)) and not isinstance(slower, bool) and slower >= 1.0):
-            raise TrajectoryError(f"slower must be a number >= 1 (how many times slower a move is planned), got {slower!r}")
+        if isinstance(slower, bool) or not isinstance(slower, numbers.Real) or not 1.0 <= slower < math.inf:
+            raise TrajectoryError(f"slower must be a finite number >= 1 (how many times slower a move is planned), "
+                                  f"got {slower!r}")
         self._require_started()
         target = _vector("q_target", q_target, self.dof)
         bad = np.flatnonzero((target < self.q_min) | (target > self.q_max))

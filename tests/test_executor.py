@@ -434,6 +434,12 @@ def test_touch_settings_are_checked(field, value):
         ExecutorConfig(**{field: value})
 
 
+def test_a_touch_step_deeper_than_the_touch_is_refused():
+    with pytest.raises(ConfigError, match="touch_step_m = 0.1 m is deeper than touch_retry_depth_m = 0.08"):
+        ExecutorConfig(touch_retry_depth_m=0.08, touch_step_m=0.1)
+    ExecutorConfig(touch_retry_depth_m=None, touch_step_m=0.1)  # off: nothing to check it against
+
+
 def test_an_empty_grasp_is_remembered_until_the_scene_is_reset_and_a_hand_without_a_force_sensor_closes_as_planned():
     """The workcell Panda has no wrist force sensor: a retried grasp closes where planned, and says once why it did
     not touch down (``touch_unavailable``)."""

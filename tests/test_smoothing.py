@@ -602,14 +602,16 @@ def test_a_move_planned_k_times_slower_takes_k_times_as_long_and_keeps_within_th
     normal = base.set_target(q1).duration_s
     s = make()
     s.reset(q0)
-    slow = s.set_target(q1, slower=4.0).duration_s
+    info = s.set_target(q1, slower=np.float32(4.0))  # any real number
+    slow = info.duration_s
+    assert info.time_stretch == pytest.approx(4.0)
     assert slow == pytest.approx(4.0 * normal, rel=0.02)
     refs = run_to_end(s)
     np.testing.assert_allclose(refs[-1].q, q1, atol=1e-9)
     assert max(np.abs(r.qd).max() for r in refs) <= (s.v_plan / 4.0).max() + 1e-9
 
 
-@pytest.mark.parametrize("slower", [0.5, 0.0, -2.0, float("nan"), True, "2"])
+@pytest.mark.parametrize("slower", [0.5, 0.0, -2.0, float("nan"), float("inf"), True, "2", None])
 def test_a_move_cannot_be_planned_faster_or_by_a_non_number(slower):
     s = make()
     q0 = (Q_MIN + Q_MAX) / 2

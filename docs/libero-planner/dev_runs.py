@@ -59,8 +59,9 @@ def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict]
 
 
 def per_suite(eps: list[dict]) -> list[str]:
-    """Successes / episodes of ``eps`` in each of the four suites, as table cells."""
-    return [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{sum(e['suite'] == s for e in eps)}" for s in SUITES]
+    """Successes / episodes of ``eps`` in each of the four suites, as table cells ("-" for a suite without any)."""
+    return [f"{sum(e['success'] for e in eps if e['suite'] == s)}/{n}" if (n := sum(e['suite'] == s for e in eps)) else "-"
+            for s in SUITES]
 
 
 def frac(eps: list[dict]) -> str:
