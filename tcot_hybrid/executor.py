@@ -578,7 +578,7 @@ class MotionExecutor:
 
     def _touch_down(self, t: float) -> None:
         """One control tick of a touch: close where the wrist feels the touch, or where the touch can go no further
-        (event ``touch``: ``ended`` "touched", "bottom" or "ik")."""
+        (event ``touch``: ``ended`` "touched", "bottom" or "ik"; "interrupted: ..." from _touch_interrupted)."""
         i = self.index
         pressed = float(np.linalg.norm(self.sim.wrist_force() - self._touch_force0))
         touched = pressed >= self.config.touch_force_n
@@ -595,6 +595,12 @@ class MotionExecutor:
                    force_n=round(pressed, 2), below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
         self._switch_gripper(i, t)
 
+    def _touch_interrupted(self, why: str) -> None:
+        """A touch cut short before it closed (the hand stays open): said, so every touch ends in a ``touch`` event."""
+        if self.phase == "touch":
+            self.event("touch", waypoint=self.index, touched=False, ended=f"interrupted: {why}",
+                       below_grasp_m=round(float(self.points[self.index][2] - self.sim.tcp_pos()[2]), 4))
+
     def _next(self) -> None:
         if self.index + 1 < len(self.points):
             self._activate(self.index + 1)
@@ -603,6 +609,7 @@ class MotionExecutor:
 
     def _drop_plan(self) -> None:
         """Forget the current plan and its waypoints (no waypoint active)."""
+        self._touch_interrupted("the plan was dropped")
         self.plan, self.points, self.grip, self._plan_q = None, np.zeros((0, 3)), np.zeros(0, bool), None
         self.closed_put_down_m = None
         self.rots = np.zeros((0, 3, 3))
@@ -741,6 +748,7 @@ class MotionExecutor:
         self.tracking_reflexes += 1
         self.event("tracking_reflex", joint=self.sim.robot.arm_joints[joint], error_rad=round(err, 4),
                    limit_rad=limit, waypoint=self.index)
+        self._touch_interrupted("tracking reflex")
         self._brake_inside_limits(self.sim.q, self.sim.qd, "tracking_reflex")
         self._ik_seed = self.sim.q
         self.phase = "done"

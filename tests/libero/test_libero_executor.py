@@ -104,3 +104,16 @@ def test_a_plan_that_comes_while_the_hand_touches_down_is_refused_and_one_after_
         if ex.phase != "touch":
             break
     assert ex.sim.gripper_closed_cmd() and ex.set_plan(other) and ex.plan is other
+
+
+def test_a_touch_cut_short_by_a_move_home_is_said():
+    ex, _, _, _ = _grasp_in_the_air(touch=True, retry=True, ticks=0)
+    for _ in range(600):
+        ex.tick()
+        if ex.phase == "touch":
+            break
+    assert ex.phase == "touch"
+    ex.go_home(0.05)
+    touch = _touches(ex)
+    assert len(touch) == 1 and touch[0]["ended"] == "interrupted: the plan was dropped" and not touch[0]["touched"]
+    assert ex.phase == "home" and not ex.sim.gripper_closed_cmd()
