@@ -109,8 +109,9 @@ class ExecutorConfig:
                       down in ``touch_step_m`` steps, at most this far, until the wrist's force sensor reads
                       ``touch_force_n`` more than at the grasp point (the fingertips met the table or the object),
                       and closes there (event ``touch``; plans that come meanwhile are refused, event
-                      ``plan_refused``: GLSR asks again at its next period). Learned grasps that miss close in the air over the object more often than
-                      beside it (docs/libero-planner.md, "Touching down on a retry"). A robot without a wrist force
+                      ``plan_refused``: GLSR asks again at its next period). Learned grasps that miss close in the
+                      air over the object more often than beside it (docs/libero-planner.md, "Touching down on a
+                      retry"). A robot without a wrist force
                       sensor closes where planned (event ``touch_unavailable``). Up: deeper search, more time;
                       None (YAML null) = off. [m]
     touch_retry_radius_m: how near an empty grasp's closing point a grasp counts as its retry [m]. Up: more grasps
@@ -591,15 +592,18 @@ class MotionExecutor:
             self._touch_end = self._touch_step()
             if self._touch_end is None:
                 return
-        self.event("touch", waypoint=i, touched=touched, ended="touched" if touched else self._touch_end,
-                   force_n=round(pressed, 2), below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
+        self._touch_event(touched, "touched" if touched else self._touch_end, force_n=round(pressed, 2))
         self._switch_gripper(i, t)
 
     def _touch_interrupted(self, why: str) -> None:
         """A touch cut short before it closed (the hand stays open): said, so every touch ends in a ``touch`` event."""
         if self.phase == "touch":
-            self.event("touch", waypoint=self.index, touched=False, ended=f"interrupted: {why}",
-                       below_grasp_m=round(float(self.points[self.index][2] - self.sim.tcp_pos()[2]), 4))
+            self._touch_event(False, f"interrupted: {why}")
+
+    def _touch_event(self, touched: bool, ended: str, **info) -> None:
+        i = self.index
+        self.event("touch", waypoint=i, touched=touched, ended=ended, **info,
+                   below_grasp_m=round(float(self.points[i][2] - self.sim.tcp_pos()[2]), 4))
 
     def _next(self) -> None:
         if self.index + 1 < len(self.points):

@@ -48,6 +48,15 @@ def _grasp_in_the_air(*, touch: bool, retry: bool, lean_deg: float = 0.0, ticks:
     return ex, grasp, table, closed_at
 
 
+def _until_touching(ex) -> None:
+    """Tick until the hand has begun touching down (at most 6 s)."""
+    for _ in range(600):
+        ex.tick()
+        if ex.phase == "touch":
+            break
+    assert ex.phase == "touch"
+
+
 def _touches(ex) -> list[dict]:
     return [e for e in ex.events if e["kind"] == "touch"]
 
@@ -87,11 +96,7 @@ def test_a_touch_that_meets_nothing_closes_at_its_bottom():
 
 def test_a_plan_that_comes_while_the_hand_touches_down_is_refused_and_one_after_it_is_taken():
     ex, grasp, _, _ = _grasp_in_the_air(touch=True, retry=True, ticks=0)
-    for _ in range(600):
-        ex.tick()
-        if ex.phase == "touch":
-            break
-    assert ex.phase == "touch"
+    _until_touching(ex)
     cam = ex.camera
     uv, depth = cam.project(grasp[None] + np.array([[0.0, 0.0, 0.1]]))
     other = WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name, kind="local")
@@ -108,11 +113,7 @@ def test_a_plan_that_comes_while_the_hand_touches_down_is_refused_and_one_after_
 
 def test_a_touch_cut_short_by_a_move_home_is_said():
     ex, _, _, _ = _grasp_in_the_air(touch=True, retry=True, ticks=0)
-    for _ in range(600):
-        ex.tick()
-        if ex.phase == "touch":
-            break
-    assert ex.phase == "touch"
+    _until_touching(ex)
     ex.go_home(0.05)
     touch = _touches(ex)
     assert len(touch) == 1 and touch[0]["ended"] == "interrupted: the plan was dropped" and not touch[0]["touched"]
