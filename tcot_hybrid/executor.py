@@ -81,6 +81,15 @@ class ExecutorConfig:
                       and stayed in the hand's grip to the time limit; docs/libero-planner.md, "The long suite:
                       its own model, and leaving a release"). Oracle plans already leave straight up. None (YAML
                       null) = off. [m]
+    max_segment_m:    a plan segment longer than this is cut into equal pieces no longer than it, each piece's end a
+                      pass-through waypoint (the gripper bit of the segment's start, the hand's orientation slerped
+                      between the segment's ends), so the hand moves along the planned line: the smoother interpolates
+                      joint targets, and between two far-apart targets a joint-space line bows away from the Cartesian
+                      one (a learned 18 cm descent into the book caddy's back compartment bowed 2.9 cm sideways, and the
+                      book landed on the compartment's wall; docs/libero-planner.md, "Straight segments"). Oracle
+                      plans are at most ``OracleConfig.spacing_m`` (4 cm) apart already; direct plans (one waypoint: the
+                      baseline's action) are not cut. Down: straighter, more waypoints to solve; None (YAML null) =
+                      off. [m]
     start_home_tol_rad: an episode whose arm starts further than this from the robot's home posture on any joint
                       moves there in joint space before its first plan (the steps it takes count against the
                       time limit; event ``started_at_home``), and retries from home return there too. Every
@@ -135,6 +144,7 @@ class ExecutorConfig:
     switch_min_horizontal_m: float | None = 0.005
     grasp_along_approach: bool = False
     release_retreat_m: float | None = 0.08
+    max_segment_m: float | None = None
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
     touch_retry_depth_m: float | None = None
@@ -153,6 +163,8 @@ class ExecutorConfig:
             require_positive("release_retreat_m (or null: off)", self.release_retreat_m)
         if self.start_home_tol_rad is not None:
             require_positive("start_home_tol_rad (or null: off)", self.start_home_tol_rad)
+        if self.max_segment_m is not None:
+            require_positive("max_segment_m (or null: off)", self.max_segment_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -260,6 +272,41 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
+def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, rots: np.ndarray,
+                      *, max_segment_m: float | None):
+    """Waypoints with every segment longer than ``max_segment_m`` cut into the fewest equal pieces no longer than it
+    (``start`` and ``start_closed``: the TCP and the gripper command now, the first segment's start). A cut point
+    keeps the gripper bit of its segment's start, so
+    grasps and releases still happen at the planned points, and takes the orientation slerped between the segment's
+    ends (the first segment's: its end's). Pure function; returns new arrays (points, grip, rots) and each output
+    point's index in the input (a cut point's is its segment's end); unchanged when ``max_segment_m`` is None."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    points, grip, rots = np.asarray(points, float), np.asarray(grip, bool), np.asarray(rots, float)
+    index = np.arange(len(points))
+    if max_segment_m is None or not len(points):
+        return points, grip, rots, index
+    out_p, out_g, out_r, out_i = [], [], [], []
+    prev, prev_g = np.asarray(start, float), bool(start_closed)
+    for i, p in enumerate(points):
+        pieces = int(np.ceil(float(np.linalg.norm(p - prev)) / max_segment_m - 1e-9))
+        if pieces > 1:
+            f = np.arange(1, pieces) / pieces
+            out_p.extend(prev + f[:, None] * (p - prev))
+            out_g.extend([prev_g] * (pieces - 1))
+            if i:
+                out_r.extend(Slerp([0.0, 1.0], Rotation.from_matrix(rots[i - 1:i + 1]))(f).as_matrix())
+            else:
+                out_r.extend([rots[0]] * (pieces - 1))
+            out_i.extend([i] * (pieces - 1))
+        out_p.append(p)
+        out_g.append(bool(grip[i]))
+        out_r.append(rots[i])
+        out_i.append(i)
+        prev, prev_g = p, bool(grip[i])
+    return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_r), np.asarray(out_i, int)
+
+
 _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a parallel-jaw hand's twin
 
 
@@ -361,7 +408,7 @@ class MotionExecutor:
         grip = np.asarray(plan.gripper_closed, bool)
         rots = np.broadcast_to(R_DOWN, (len(plan), 3, 3)) if plan.tcp_rot is None else plan.tcp_rot
         cfg = self.config
-        retreat = False
+        retreat, corners = False, 0
         source = np.arange(len(plan))
         if plan.kind != "direct":  # square_transits leaves a plan alone when both thresholds are off
             points, grip, source = square_transits(
@@ -373,7 +420,10 @@ class MotionExecutor:
                                                        lift_m=cfg.release_retreat_m)
             retreat = len(last) > len(source)
             source = source[last]
-            rots = rots[source]
+            corners = len(points) - len(plan) - retreat
+            points, grip, rots, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points,
+                                                        grip, np.asarray(rots)[source], max_segment_m=cfg.max_segment_m)
+            source = source[cut]
         rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q
@@ -396,7 +446,7 @@ class MotionExecutor:
                 self._brake_inside_limits(q, self.sim.qd, "resync")
             self._ik_seed = q
         self.event("plan_adopted", plan_kind=plan.kind, step=plan.step, waypoints=len(plan),
-                   corners_added=len(points) - len(plan) - retreat, retreat_added=retreat)
+                   corners_added=corners, retreat_added=retreat, cuts_added=len(points) - len(plan) - retreat - corners)
         self._activate(0)
         return True
 
