@@ -272,21 +272,22 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
-def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, rots: np.ndarray,
-                      *, max_segment_m: float | None):
+def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
+                      max_segment_m: float | None):
     """Waypoints with every segment longer than ``max_segment_m`` cut into the fewest equal pieces no longer than it
     (``start`` and ``start_closed``: the TCP and the gripper command now, the first segment's start). A cut point
-    keeps the gripper bit of its segment's start, so
-    grasps and releases still happen at the planned points, and takes the orientation slerped between the segment's
-    ends (the first segment's: its end's). Pure function; returns new arrays (points, grip, rots) and each output
-    point's index in the input (a cut point's is its segment's end); unchanged when ``max_segment_m`` is None."""
-    from scipy.spatial.transform import Rotation, Slerp
-
-    points, grip, rots = np.asarray(points, float), np.asarray(grip, bool), np.asarray(rots, float)
+    keeps the gripper bit of its segment's start, so grasps and releases still happen at the planned points, and, as
+    a corner of :func:`square_transits` does, its segment end's orientation: the hand turns on the first piece, and the
+    half-turned twin is chosen on the same turn as without the cut (orientations slerped along the pieces turned the
+    hand by less than a quarter turn at a time, the twin came mid-carry instead, and the wine bottle's carry to the
+    rack tripped the tracking reflex: docs/libero-planner.md, "Straight segments"). Pure function; returns new arrays
+    (points, grip) and each output point's index in the input (a cut point's is its segment's end); unchanged when
+    ``max_segment_m`` is None."""
+    points, grip = np.asarray(points, float), np.asarray(grip, bool)
     index = np.arange(len(points))
     if max_segment_m is None or not len(points):
-        return points, grip, rots, index
-    out_p, out_g, out_r, out_i = [], [], [], []
+        return points, grip, index
+    out_p, out_g, out_i = [], [], []
     prev, prev_g = np.asarray(start, float), bool(start_closed)
     for i, p in enumerate(points):
         pieces = int(np.ceil(float(np.linalg.norm(p - prev)) / max_segment_m - 1e-9))
@@ -294,17 +295,12 @@ def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray,
             f = np.arange(1, pieces) / pieces
             out_p.extend(prev + f[:, None] * (p - prev))
             out_g.extend([prev_g] * (pieces - 1))
-            if i:
-                out_r.extend(Slerp([0.0, 1.0], Rotation.from_matrix(rots[i - 1:i + 1]))(f).as_matrix())
-            else:
-                out_r.extend([rots[0]] * (pieces - 1))
             out_i.extend([i] * (pieces - 1))
         out_p.append(p)
         out_g.append(bool(grip[i]))
-        out_r.append(rots[i])
         out_i.append(i)
         prev, prev_g = p, bool(grip[i])
-    return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_r), np.asarray(out_i, int)
+    return np.asarray(out_p), np.asarray(out_g, bool), np.asarray(out_i, int)
 
 
 _HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # about the TCP's z (approach) axis: a parallel-jaw hand's twin
@@ -421,9 +417,10 @@ class MotionExecutor:
             retreat = len(last) > len(source)
             source = source[last]
             corners = len(points) - len(plan) - retreat
-            points, grip, rots, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points,
-                                                        grip, np.asarray(rots)[source], max_segment_m=cfg.max_segment_m)
+            points, grip, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
+                                                  max_segment_m=cfg.max_segment_m)
             source = source[cut]
+            rots = rots[source]
         rots = np.asarray(rots)
         q = self.sim.q
         ref_q = self.smoother.reference.q

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.executor import RETREAT_NEAR_M, ExecutorConfig, retreat_after_release, square_transits
+from tcot_hybrid.executor import (RETREAT_NEAR_M, ExecutorConfig, cut_long_segments, retreat_after_release,
+                                  square_transits)
 
 H, V = 0.06, 0.02  # the thresholds these tests use
 
@@ -475,3 +476,107 @@ def test_an_empty_grasp_is_remembered_until_the_scene_is_reset_and_a_hand_withou
     assert np.linalg.norm(second - grasp) < ex.config.reach_tol_m + 0.002
     ex.reset_after_scene_reset()
     assert ex.empty_grasp_points == []
+
+
+def test_a_long_segment_is_cut_into_equal_pieces_on_its_line():
+    """An 18 cm descent with pieces of at most 4 cm: five equal pieces on the planned line, each cut point passing
+    through (the gripper bit of the segment's start) and taking its segment end's index (so its orientation); a
+    short segment is left alone."""
+    start = np.array([0.0, 0.0, 0.30])
+    points = np.array([[0.0, 0.0, 0.12], [0.02, 0.0, 0.12]])
+    p, g, index = cut_long_segments(start, False, points, np.array([False, True]), max_segment_m=0.04)
+    np.testing.assert_allclose(p[:5, 2], [0.264, 0.228, 0.192, 0.156, 0.12])
+    np.testing.assert_allclose(p[:5, :2], 0.0)
+    np.testing.assert_allclose(p[5], points[1])
+    np.testing.assert_array_equal(g, [False] * 5 + [True])  # the grasp still closes at its planned point
+    np.testing.assert_array_equal(index, [0, 0, 0, 0, 0, 1])
+
+    carry = np.array([[0.02, 0.0, 0.30], [0.02, 0.0, 0.12]])  # a short move over, then the long descent
+    p, g, index = cut_long_segments(start, True, carry, np.array([True, False]), max_segment_m=0.04)
+    assert index.tolist() == [0, 1, 1, 1, 1, 1]
+    np.testing.assert_array_equal(g, [True] * 5 + [False])  # carried closed down to the release
+
+
+def test_the_first_cut_carries_the_gripper_command_of_now():
+    """The first segment starts at the TCP with the gripper as it is: its cut points keep that command, so a plan
+    whose first point releases opens there, not at the first cut."""
+    p, g, _ = cut_long_segments(np.zeros(3), True, np.array([[0.0, 0.0, -0.1]]), np.array([False]),
+                                max_segment_m=0.04)
+    np.testing.assert_array_equal(g, [True, True, False])
+    np.testing.assert_allclose(np.diff(p[:, 2]), [-0.1 / 3] * 2)
+
+
+@pytest.mark.parametrize("length", [0.0, 0.04, 0.0399])
+def test_segments_no_longer_than_the_limit_and_a_switched_off_cut_leave_the_plan_alone(length):
+    points = np.array([[length, 0.0, 0.0]])
+    p, g, index = cut_long_segments(np.zeros(3), False, points, np.array([True]), max_segment_m=0.04)
+    np.testing.assert_array_equal(p, points)
+    assert g.tolist() == [True] and index.tolist() == [0]
+    p, _, _ = cut_long_segments(np.zeros(3), False, np.array([[1.0, 0, 0]]), np.array([True]), max_segment_m=None)
+    assert len(p) == 1
+
+
+def test_a_cut_point_asks_its_segment_ends_orientation_so_the_twin_is_chosen_where_it_was():
+    """Cut points take the orientation of their segment's end, as squared corners do: the hand turns on the first
+    piece, where the executor decides on the half-turned twin as it would without the cut."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(max_segment_m=0.04)))
+    r.settle()
+    ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+    _, R_now = ex.dyn.ee_pose()
+    c, s = np.cos(1.2), np.sin(1.2)
+    R = R_now @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    goal = sim.tcp_pos() + np.array([0.0, 0.0, -0.15])
+    uv, depth = cam.project(goal[None])
+    assert ex.set_plan(WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name,
+                                    kind="local", tcp_rot=R[None]))
+    assert ex.events[-1]["cuts_added"] == 3 and len(ex.points) == 4
+    np.testing.assert_allclose(ex.rots, np.broadcast_to(R, (4, 3, 3)))
+
+
+@pytest.mark.parametrize("value", [0.0, -0.04])
+def test_the_segment_limit_is_checked(value):
+    with pytest.raises(ConfigError, match="max_segment_m"):
+        ExecutorConfig(max_segment_m=value)
+
+
+def test_a_cut_plan_keeps_the_hand_near_its_planned_line():
+    """A learned-style plan of one far, low point (squared into a move over and a descent): between two far IK
+    targets the joint-space reference bows off the planned line; cut into 4 cm pieces, the hand stays within
+    about a blend's corner of it."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    def run(cut):
+        r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(max_segment_m=cut)))
+        r.settle()
+        ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+        start = sim.tcp_pos().copy()
+        goal = start + np.array([0.18, -0.12, -0.16])
+        uv, depth = cam.project(goal[None])
+        assert ex.set_plan(WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([False]), camera=cam.name,
+                                        kind="local"))
+        assert ex.events[-1]["corners_added"] == 1 and (ex.events[-1]["cuts_added"] > 0) == (cut is not None)
+        line = np.stack([start, np.r_[goal[:2], start[2]], goal])  # over at height, then down
+        off = 0.0
+        for _ in range(1500):
+            ex.tick()
+            p = sim.tcp_pos()
+            off = max(off, min(_off_segment(p, line[k], line[k + 1]) for k in range(2)))
+            if ex.plan_finished:
+                break
+        assert ex.plan_finished and np.linalg.norm(sim.tcp_pos() - goal) < 0.01
+        return off
+
+    bowed, cut = run(None), run(0.04)
+    assert bowed > 0.02 and cut < 0.5 * bowed and cut < 0.015, (bowed, cut)
+
+
+def _off_segment(p, a, b) -> float:
+    d = b - a
+    t = float(np.clip(np.dot(p - a, d) / np.dot(d, d), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * d)))

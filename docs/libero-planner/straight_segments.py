@@ -1,0 +1,95 @@
+"""Whether a plan's long segments should be cut so the hand follows the planned line (``executor.max_segment_m``;
+docs/libero-planner.md, "Straight segments"): first the book, where it was found (training-range layouts), then the
+judgement by the rule set before its runs (docs/seeds.md, stop 68): all 40 tasks, global-only and GLSR at the stack's
+defaults, with and without the cut, on fresh development layouts (5 a task, 10 on libero_10).
+
+    .venv/bin/python docs/libero-planner/straight_segments.py --gather   # runs/dev/cut* -> straight_segments.json
+    .venv/bin/python docs/libero-planner/straight_segments.py            # straight_segments.json -> docs/libero-planner.md
+"""
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import dev_runs  # this folder's: run as a script, the folder is on sys.path
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "straight_segments.json"
+SECTION = "libero-straight-segments"
+BOOK = "libero_10:STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"
+SCREEN_FIRST, SCREEN_LAYOUTS = 30192, 20  # training-range layouts (docs/seeds.md): where the bow was found
+PER_TASK = {"libero_spatial": 5, "libero_object": 5, "libero_goal": 5, "libero_10": 10}
+FIRST = {"libero_spatial": 20052, "libero_object": 20060, "libero_goal": 20221, "libero_10": 20253}  # stop 68's rule
+SETTINGS = (("off", "as planned (no cut)", ""),
+            ("on", "segments cut to 4 cm", " --executor.max-segment-m 0.04"))
+MODES = ("global", "glsr")
+KEEP = ("task", "suite", "mode", "seed", "success", "steps", "tracking_reflexes")
+
+
+def _command(which: str, episodes: int, first: int, flag: str) -> str:
+    return (f"tcot eval {which} --planners learned --modes global,glsr --init sampled --episodes {episodes} "
+            f"--seed-start {first}{flag}")
+
+
+def _runs() -> list[tuple[str, str, str]]:
+    """(run directory under runs/dev, setting, command): the book's screen, then one judgement run per suite and
+    setting."""
+    screen = [(f"cutscreen_{name}", f"cutscreen_{name}", _command(f"--tasks {BOOK}", SCREEN_LAYOUTS, SCREEN_FIRST, flag))
+              for name, _, flag in SETTINGS]
+    return screen + [(f"cut_{name}_{suite}", f"cut_{name}", _command(f"--suite {suite}", PER_TASK[suite], FIRST[suite],
+                                                                      flag))
+                     for suite in FIRST for name, _, flag in SETTINGS]
+
+
+def _row(setting: str, e: dict) -> dict | None:
+    if e["perturb"] != "none":
+        return None
+    return {"run": setting, **{k: e.get(k) for k in KEEP}}
+
+
+def gather() -> None:
+    setting = {run: name for run, name, _ in _runs()}
+    dev_runs.gather(((run, cmd) for run, _, cmd in _runs()), OUT, lambda run, e: _row(setting[run], e))
+
+
+def _screen(rows: list[dict]) -> list[str]:
+    rows = [r for r in rows if r["run"].startswith("cutscreen_")]
+    out = [f"**Where it was found.** The book (libero_10), training-range layouts {SCREEN_FIRST}-"
+           f"{SCREEN_FIRST + SCREEN_LAYOUTS - 1}, the stack's defaults otherwise:", "",
+           "| segments | mode | successes | episodes with a tracking reflex | median planner steps of the successes |",
+           "|---|---|---|---|---|"]
+    for name, text, _ in SETTINGS:
+        for mode in MODES:
+            eps = [r for r in rows if r["run"] == f"cutscreen_{name}" and r["mode"] == mode]
+            if not eps:
+                continue
+            won = sorted(r["steps"] for r in eps if r["success"])
+            median = won[len(won) // 2] if won else "-"
+            out.append(f"| {text} | {mode} | {sum(r['success'] for r in eps)}/{len(eps)} | "
+                       f"{sum(bool(r['tracking_reflexes']) for r in eps)} | {median} |")
+    return out + [""]
+
+
+def _judgement(rows: list[dict]) -> list[str]:
+    ran = Counter((r["run"], r["suite"], r["mode"]) for r in rows)
+    done = [s for s in FIRST if all(ran[(f"cut_{n}", s, m)] == 10 * PER_TASK[s] for n, _, _ in SETTINGS for m in MODES)]
+    rows = [r for r in rows if r["run"].startswith("cut_") and r["suite"] in done]
+    layouts = ", ".join(f"{s} {FIRST[s]}-{FIRST[s] + PER_TASK[s] - 1}" for s in done)
+    table_rows = tuple((f"cut_{name}", mode, text, "") for mode in MODES for name, text, _ in SETTINGS)
+    lines = [f"**The judgement** (docs/seeds.md, stop 68). Sampled development layouts ({layouts}), all ten tasks of "
+             "each suite, the stack's defaults otherwise (no `--checkpoint`); won / lost against the uncut row in the "
+             "same mode on the same layouts:", ""] + dev_runs.checkpoint_table(rows, table_rows, head="segments")
+    for mode in MODES:
+        lines += ["", dev_runs.changed_tasks(rows, mode, "cut_off", "cut_on", "5 or 10", "cut_off")]
+    return lines + [""]
+
+
+def lines() -> list[str]:
+    rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
+    return _screen(rows) + _judgement(rows) + dev_runs.command_lines("straight_segments.py", 2,
+                                                                     [(run, cmd) for run, _, cmd in _runs()])
+
+
+if __name__ == "__main__":
+    dev_runs.main(__doc__, gather, lines, SECTION)
