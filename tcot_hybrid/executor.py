@@ -12,11 +12,12 @@ planner rate and before any motion (never inside ``control_tick``); an infeasibl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 from tcot_hybrid.camera import CameraModel
-from tcot_hybrid.config import require_nonnegative, require_positive
+from tcot_hybrid.config import require_choice, require_nonnegative, require_positive
 from tcot_hybrid.errors import ConfigError, LiftError, TcotError, TrajectoryError
 from tcot_hybrid.ik import IKSolver, IKTarget, rotation_angle
 from tcot_hybrid.lift import LiftConfig, lift_waypoints
@@ -88,8 +89,15 @@ class ExecutorConfig:
                       one (a learned 18 cm descent into the book caddy's back compartment bowed 2.9 cm sideways, and the
                       book landed on the compartment's wall; docs/libero-planner.md, "Straight segments"). Oracle
                       plans are at most ``OracleConfig.spacing_m`` (4 cm) apart already; direct plans (one waypoint: the
-                      baseline's action) are not cut. Down: straighter, more waypoints to solve; None (YAML null) =
-                      off. [m]
+                      baseline's action) are not cut. "auto" (default): MAX_SEGMENT_LIBERO_M on LIBERO (judged on
+                      development layouts of all 40 tasks, docs/seeds.md, stop 68), off on the workcell (its reporting
+                      tables were measured without it). Down: straighter, more waypoints to solve, slower moves;
+                      None (YAML null) = off. [m]
+    cut_segments:     which segments ``max_segment_m`` cuts: "closed_descents" (default), the descents of a closed
+                      hand within VERTICAL_TILT_RAD (20 degrees) of straight down (an object lowered onto its place: the
+                      book's); "vertical", every segment that close to straight up or down (grasp descents, rises);
+                      "all", the moves over too (cut everywhere, the hand's paths changed on tasks that had succeeded
+                      and libero_10 lost more layouts than it won: docs/libero-planner.md, "Straight segments").
     start_home_tol_rad: an episode whose arm starts further than this from the robot's home posture on any joint
                       moves there in joint space before its first plan (the steps it takes count against the
                       time limit; event ``started_at_home``), and retries from home return there too. Every
@@ -144,7 +152,8 @@ class ExecutorConfig:
     switch_min_horizontal_m: float | None = 0.005
     grasp_along_approach: bool = False
     release_retreat_m: float | None = 0.08
-    max_segment_m: float | None = None
+    max_segment_m: float | None | Literal["auto"] = None
+    cut_segments: str = "closed_descents"
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
     touch_retry_depth_m: float | None = None
@@ -163,8 +172,11 @@ class ExecutorConfig:
             require_positive("release_retreat_m (or null: off)", self.release_retreat_m)
         if self.start_home_tol_rad is not None:
             require_positive("start_home_tol_rad (or null: off)", self.start_home_tol_rad)
-        if self.max_segment_m is not None:
-            require_positive("max_segment_m (or null: off)", self.max_segment_m)
+        require_choice("executor.cut_segments", self.cut_segments, CUT_SEGMENTS)
+        if isinstance(self.max_segment_m, str):
+            require_choice("executor.max_segment_m", self.max_segment_m, ("auto",))
+        elif self.max_segment_m is not None:
+            require_positive("max_segment_m (or null: off, or auto)", self.max_segment_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -178,6 +190,17 @@ class ExecutorConfig:
             raise ConfigError(f"touch_step_m = {self.touch_step_m} m is deeper than touch_retry_depth_m = "
                               f"{self.touch_retry_depth_m} m: a touch would not take a single step; choose a step "
                               f"<= the depth")
+
+
+CUT_SEGMENTS = ("closed_descents", "vertical", "all")  # executor.cut_segments
+MAX_SEGMENT_LIBERO_M = 0.04  # executor.max_segment_m "auto" on LIBERO: the oracle's spacing (docs/seeds.md, stop 68)
+
+
+def resolve_max_segment(max_segment_m: float | None | str, world_kind: str) -> float | None:
+    """``executor.max_segment_m`` with "auto" made concrete for a world (see :class:`ExecutorConfig`)."""
+    if max_segment_m == "auto":
+        return MAX_SEGMENT_LIBERO_M if world_kind == "libero" else None
+    return max_segment_m
 
 
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
@@ -272,15 +295,21 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
+VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
+
+
 def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
-                      max_segment_m: float | None):
+                      max_segment_m: float | None, which: str = "all"):
     """Waypoints with every segment longer than ``max_segment_m`` cut into the fewest equal pieces no longer than it
     (``start`` and ``start_closed``: the TCP and the gripper command now, the first segment's start). A cut point
     keeps the gripper bit of its segment's start, so grasps and releases still happen at the planned points, and, as
     a corner of :func:`square_transits` does, its segment end's orientation: the hand turns on the first piece, and the
     half-turned twin is chosen on the same turn as without the cut (orientations slerped along the pieces turned the
     hand by less than a quarter turn at a time, the twin came mid-carry instead, and the wine bottle's carry to the
-    rack tripped the tracking reflex: docs/libero-planner.md, "Straight segments"). Pure function; returns new arrays
+    rack tripped the tracking reflex: docs/libero-planner.md, "Straight segments"). ``which`` (CUT_SEGMENTS): "all";
+    "vertical", only segments within VERTICAL_TILT_RAD of straight up or down (descents onto a grasp or a place, rises
+    from them); "closed_descents", only the vertical descents of a closed hand (an object lowered onto its place, a
+    closed hand pressing down); the others keep the smoother's joint-space path. Pure function; returns new arrays
     (points, grip) and each output point's index in the input (a cut point's is its segment's end); unchanged when
     ``max_segment_m`` is None."""
     points, grip = np.asarray(points, float), np.asarray(grip, bool)
@@ -290,7 +319,12 @@ def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray,
     out_p, out_g, out_i = [], [], []
     prev, prev_g = np.asarray(start, float), bool(start_closed)
     for i, p in enumerate(points):
-        pieces = int(np.ceil(float(np.linalg.norm(p - prev)) / max_segment_m - 1e-9))
+        d = p - prev
+        pieces = int(np.ceil(float(np.linalg.norm(d)) / max_segment_m - 1e-9))
+        vertical = float(np.linalg.norm(d[:2])) <= np.tan(VERTICAL_TILT_RAD) * abs(float(d[2]))
+        if (which == "vertical" and not vertical) or (which == "closed_descents"
+                                                      and not (vertical and d[2] < 0 and prev_g)):
+            pieces = 1
         if pieces > 1:
             f = np.arange(1, pieces) / pieces
             out_p.extend(prev + f[:, None] * (p - prev))
@@ -340,9 +374,10 @@ class MotionExecutor:
 
     def __init__(self, sim: Simulation, *, ik: IKSolver, smoother, controller, safety, dynamics,
                  camera: CameraModel, config: ExecutorConfig = ExecutorConfig(),
-                 lift_config: LiftConfig = LiftConfig()):
+                 lift_config: LiftConfig = LiftConfig(), world_kind: str = "workcell"):
         self.sim, self.ik, self.smoother, self.controller = sim, ik, smoother, controller
         self.safety, self.dyn, self.camera, self.config, self.lift_config = safety, dynamics, camera, config, lift_config
+        self.max_segment_m = resolve_max_segment(config.max_segment_m, world_kind)  # "auto" made concrete
         self.substeps = sim.timing.substeps
         self.ctrl_dt = sim.timing.ctrl_dt
         self.events: list[dict] = []
@@ -418,7 +453,8 @@ class MotionExecutor:
             source = source[last]
             corners = len(points) - len(plan) - retreat
             points, grip, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                                  max_segment_m=cfg.max_segment_m)
+                                                  max_segment_m=self.max_segment_m,
+                                                  which=cfg.cut_segments)
             source = source[cut]
             rots = rots[source]
         rots = np.asarray(rots)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.executor import (RETREAT_NEAR_M, ExecutorConfig, cut_long_segments, retreat_after_release,
-                                  square_transits)
+from tcot_hybrid.executor import (MAX_SEGMENT_LIBERO_M, RETREAT_NEAR_M, ExecutorConfig, cut_long_segments,
+                                  resolve_max_segment, retreat_after_release, square_transits)
 
 H, V = 0.06, 0.02  # the thresholds these tests use
 
@@ -523,7 +523,8 @@ def test_a_cut_point_asks_its_segment_ends_orientation_so_the_twin_is_chosen_whe
     from tcot_hybrid.plan import WaypointPlan
     from tcot_hybrid.run_config import RunConfig
 
-    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(max_segment_m=0.04)))
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0,
+                                executor=ExecutorConfig(max_segment_m=0.04, cut_segments="vertical")))
     r.settle()
     ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
     _, R_now = ex.dyn.ee_pose()
@@ -537,10 +538,40 @@ def test_a_cut_point_asks_its_segment_ends_orientation_so_the_twin_is_chosen_whe
     np.testing.assert_allclose(ex.rots, np.broadcast_to(R, (4, 3, 3)))
 
 
-@pytest.mark.parametrize("value", [0.0, -0.04])
+def test_which_segments_are_cut():
+    """"closed_descents": only a closed hand's (near) vertical descent; "vertical": rises and open descents too, never a
+    move over; "all": every long segment."""
+    start = np.array([0.0, 0.0, 0.30])
+    points = np.array([[0.0, 0.0, 0.10],  # open descent (20 cm)
+                       [0.0, 0.0, 0.10],  # close
+                       [0.03, 0.0, 0.30],  # closed rise, 8.5 degrees off vertical
+                       [0.23, 0.0, 0.30],  # closed move over (20 cm)
+                       [0.23, 0.0, 0.10],  # closed descent (20 cm)
+                       [0.23, 0.0, 0.10]])  # release
+    grip = np.array([False, True, True, True, True, False])
+    cuts = {}
+    for which in ("closed_descents", "vertical", "all"):
+        _, g, index = cut_long_segments(start, False, points, grip, max_segment_m=0.05, which=which)
+        cuts[which] = np.bincount(index, minlength=len(points)) - 1  # cut points added before each planned point
+        assert g[np.flatnonzero(np.r_[np.diff(index) > 0, True])].tolist() == grip.tolist()  # at the planned points
+    assert cuts["closed_descents"].tolist() == [0, 0, 0, 0, 3, 0]
+    assert cuts["vertical"].tolist() == [3, 0, 4, 0, 3, 0]
+    assert cuts["all"].tolist() == [3, 0, 4, 3, 3, 0]
+
+
+@pytest.mark.parametrize("value", [0.0, -0.04, "always"])
 def test_the_segment_limit_is_checked(value):
-    with pytest.raises(ConfigError, match="max_segment_m"):
+    with pytest.raises(ConfigError, match="max_segment_m") as err:
         ExecutorConfig(max_segment_m=value)
+    assert str(value) in str(err.value) and ("auto" in str(err.value) or "> 0" in str(err.value))
+    with pytest.raises(ConfigError, match="cut_segments.*closed_descents"):
+        ExecutorConfig(cut_segments="diagonal")
+
+
+def test_the_segment_limit_is_auto_on_libero_and_off_on_the_workcell_unless_set():
+    assert resolve_max_segment("auto", "libero") == MAX_SEGMENT_LIBERO_M == 0.04
+    assert resolve_max_segment("auto", "workcell") is None
+    assert resolve_max_segment(0.02, "workcell") == 0.02 and resolve_max_segment(None, "libero") is None
 
 
 def test_a_cut_plan_keeps_the_hand_near_its_planned_line():
@@ -552,7 +583,8 @@ def test_a_cut_plan_keeps_the_hand_near_its_planned_line():
     from tcot_hybrid.run_config import RunConfig
 
     def run(cut):
-        r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0, executor=ExecutorConfig(max_segment_m=cut)))
+        r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0,
+                                    executor=ExecutorConfig(max_segment_m=cut, cut_segments="all")))
         r.settle()
         ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
         start = sim.tcp_pos().copy()

@@ -4,7 +4,7 @@ judgement by the rule set before its runs (docs/seeds.md, stop 68): all 40 tasks
 defaults, with and without the cut, on fresh development layouts (5 a task, 10 on libero_10).
 
     .venv/bin/python docs/libero-planner/straight_segments.py --gather   # runs/dev/cut* -> straight_segments.json
-    .venv/bin/python docs/libero-planner/straight_segments.py            # straight_segments.json -> docs/libero-planner.md
+    .venv/bin/python docs/libero-planner/straight_segments.py            # the .json -> docs/libero-planner.md
 """
 from __future__ import annotations
 
@@ -20,9 +20,18 @@ SECTION = "libero-straight-segments"
 BOOK = "libero_10:STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"
 SCREEN_FIRST, SCREEN_LAYOUTS = 30192, 20  # training-range layouts (docs/seeds.md): where the bow was found
 PER_TASK = {"libero_spatial": 5, "libero_object": 5, "libero_goal": 5, "libero_10": 10}
-FIRST = {"libero_spatial": 20052, "libero_object": 20060, "libero_goal": 20221, "libero_10": 20253}  # stop 68's rule
-SETTINGS = (("off", "as planned (no cut)", ""),
+# (run prefix, what ran, the fresh layouts' first seed per suite); both rules were set before their runs (docs/seeds.md,
+# stop 68). The first ran at 5e03de3, a cut point's orientation slerped along its segment; the second at 85b7765, a
+# cut point at its segment end's orientation (as a squared corner).
+JUDGEMENTS = (("cut", "first judgement: cut points' orientations slerped (5e03de3)",
+               {"libero_spatial": 20052, "libero_object": 20060, "libero_goal": 20221, "libero_10": 20253}),
+              ("cut2", "second judgement: cut points at their segment end's orientation (85b7765)",
+               {"libero_spatial": 20057, "libero_object": 20065, "libero_goal": 20226, "libero_10": 20263}))
+SETTINGS = (("off", "as planned (no cut)", " --executor.max-segment-m None"),
             ("on", "segments cut to 4 cm", " --executor.max-segment-m 0.04"))
+SCREENS = (("off", "as planned (no cut)", " --executor.max-segment-m None"),
+           ("on", "cut, orientations slerped (5e03de3)", " --executor.max-segment-m 0.04"),
+           ("on2", "cut, each at its segment end's orientation (85b7765)", " --executor.max-segment-m 0.04"))
 MODES = ("global", "glsr")
 KEEP = ("task", "suite", "mode", "seed", "success", "steps", "tracking_reflexes")
 
@@ -33,13 +42,13 @@ def _command(which: str, episodes: int, first: int, flag: str) -> str:
 
 
 def _runs() -> list[tuple[str, str, str]]:
-    """(run directory under runs/dev, setting, command): the book's screen, then one judgement run per suite and
-    setting."""
-    screen = [(f"cutscreen_{name}", f"cutscreen_{name}", _command(f"--tasks {BOOK}", SCREEN_LAYOUTS, SCREEN_FIRST, flag))
-              for name, _, flag in SETTINGS]
-    return screen + [(f"cut_{name}_{suite}", f"cut_{name}", _command(f"--suite {suite}", PER_TASK[suite], FIRST[suite],
-                                                                      flag))
-                     for suite in FIRST for name, _, flag in SETTINGS]
+    """(run directory under runs/dev, setting, command): the book's screens, then one run per judgement, suite and
+    setting. (The uncut runs ran before "auto" was the default, without the flag: the same thing.)"""
+    screen = [(f"cutscreen_{name}", f"cutscreen_{name}",
+               _command(f"--tasks {BOOK}", SCREEN_LAYOUTS, SCREEN_FIRST, flag)) for name, _, flag in SCREENS]
+    return screen + [(f"{prefix}_{name}_{suite}", f"{prefix}_{name}",
+                      _command(f"--suite {suite}", PER_TASK[suite], first[suite], flag))
+                     for prefix, _, first in JUDGEMENTS for suite in first for name, _, flag in SETTINGS]
 
 
 def _row(setting: str, e: dict) -> dict | None:
@@ -59,7 +68,7 @@ def _screen(rows: list[dict]) -> list[str]:
            f"{SCREEN_FIRST + SCREEN_LAYOUTS - 1}, the stack's defaults otherwise:", "",
            "| segments | mode | successes | episodes with a tracking reflex | median planner steps of the successes |",
            "|---|---|---|---|---|"]
-    for name, text, _ in SETTINGS:
+    for name, text, _ in SCREENS:
         for mode in MODES:
             eps = [r for r in rows if r["run"] == f"cutscreen_{name}" and r["mode"] == mode]
             if not eps:
@@ -71,24 +80,26 @@ def _screen(rows: list[dict]) -> list[str]:
     return out + [""]
 
 
-def _judgement(rows: list[dict]) -> list[str]:
+def _judgement(rows: list[dict], prefix: str, label: str, first: dict) -> list[str]:
     ran = Counter((r["run"], r["suite"], r["mode"]) for r in rows)
-    done = [s for s in FIRST if all(ran[(f"cut_{n}", s, m)] == 10 * PER_TASK[s] for n, _, _ in SETTINGS for m in MODES)]
-    rows = [r for r in rows if r["run"].startswith("cut_") and r["suite"] in done]
-    layouts = ", ".join(f"{s} {FIRST[s]}-{FIRST[s] + PER_TASK[s] - 1}" for s in done)
-    table_rows = tuple((f"cut_{name}", mode, text, "") for mode in MODES for name, text, _ in SETTINGS)
-    lines = [f"**The judgement** (docs/seeds.md, stop 68). Sampled development layouts ({layouts}), all ten tasks of "
-             "each suite, the stack's defaults otherwise (no `--checkpoint`); won / lost against the uncut row in the "
-             "same mode on the same layouts:", ""] + dev_runs.checkpoint_table(rows, table_rows, head="segments")
+    done = [s for s in first if all(ran[(f"{prefix}_{n}", s, m)] == 10 * PER_TASK[s] for n, _, _ in SETTINGS
+                                    for m in MODES)]
+    rows = [r for r in rows if r["run"].startswith(prefix + "_") and r["suite"] in done]
+    layouts = ", ".join(f"{s} {first[s]}-{first[s] + PER_TASK[s] - 1}" for s in done)
+    table_rows = tuple((f"{prefix}_{name}", mode, text, "") for mode in MODES for name, text, _ in SETTINGS)
+    lines = [f"**{label[0].upper() + label[1:]}.** Sampled development layouts ({layouts}), all ten tasks of each "
+             "suite, the stack's defaults otherwise (no `--checkpoint`); won / lost against the uncut row in the same "
+             "mode on the same layouts:", ""] + dev_runs.checkpoint_table(rows, table_rows, head="segments")
     for mode in MODES:
-        lines += ["", dev_runs.changed_tasks(rows, mode, "cut_off", "cut_on", "5 or 10", "cut_off")]
+        lines += ["", dev_runs.changed_tasks(rows, mode, f"{prefix}_off", f"{prefix}_on", "5 or 10", f"{prefix}_off")]
     return lines + [""]
 
 
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    return _screen(rows) + _judgement(rows) + dev_runs.command_lines("straight_segments.py", 2,
-                                                                     [(run, cmd) for run, _, cmd in _runs()])
+    judged = [line for prefix, label, first in JUDGEMENTS for line in _judgement(rows, prefix, label, first)]
+    return _screen(rows) + judged + dev_runs.command_lines("straight_segments.py", 2,
+                                                           [(run, cmd) for run, _, cmd in _runs()])
 
 
 if __name__ == "__main__":
