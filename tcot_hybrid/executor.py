@@ -12,7 +12,6 @@ planner rate and before any motion (never inside ``control_tick``); an infeasibl
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -82,17 +81,17 @@ class ExecutorConfig:
                       and stayed in the hand's grip to the time limit; docs/libero-planner.md, "The long suite:
                       its own model, and leaving a release"). Oracle plans already leave straight up. None (YAML
                       null) = off. [m]
-    max_segment_m:    a plan segment longer than this is cut into equal pieces no longer than it, each piece's end a
-                      pass-through waypoint (the gripper bit of the segment's start, the hand's orientation slerped
-                      between the segment's ends), so the hand moves along the planned line: the smoother interpolates
+    max_segment_m:    a plan segment longer than this (of the kind ``cut_segments`` names) is cut into equal pieces no
+                      longer than it, each piece's end a pass-through waypoint (the gripper bit of the segment's start,
+                      the orientation of its end), so the hand moves along the planned line: the smoother interpolates
                       joint targets, and between two far-apart targets a joint-space line bows away from the Cartesian
                       one (a learned 18 cm descent into the book caddy's back compartment bowed 2.9 cm sideways, and the
                       book landed on the compartment's wall; docs/libero-planner.md, "Straight segments"). Oracle
                       plans are at most ``OracleConfig.spacing_m`` (4 cm) apart already; direct plans (one waypoint: the
-                      baseline's action) are not cut. "auto" (default): MAX_SEGMENT_LIBERO_M on LIBERO (judged on
-                      development layouts of all 40 tasks, docs/seeds.md, stop 68), off on the workcell (its reporting
-                      tables were measured without it). Down: straighter, more waypoints to solve, slower moves;
-                      None (YAML null) = off. [m]
+                      baseline's action) are not cut. None (YAML null, the default) = off: on LIBERO, cut to 4 cm
+                      (``cut_segments`` every one, the vertical ones, or a closed hand's vertical descents), the book
+                      went from 5 to 8-9 of 10 and other libero_10 tasks lost about as much (judged three times, not
+                      adopted: docs/seeds.md, stop 68). Down: straighter, more waypoints to solve, slower moves. [m]
     cut_segments:     which segments ``max_segment_m`` cuts: "closed_descents" (default), the descents of a closed
                       hand within VERTICAL_TILT_RAD (20 degrees) of straight down (an object lowered onto its place: the
                       book's); "vertical", every segment that close to straight up or down (grasp descents, rises);
@@ -152,7 +151,7 @@ class ExecutorConfig:
     switch_min_horizontal_m: float | None = 0.005
     grasp_along_approach: bool = False
     release_retreat_m: float | None = 0.08
-    max_segment_m: float | None | Literal["auto"] = None
+    max_segment_m: float | None = None
     cut_segments: str = "closed_descents"
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
@@ -173,10 +172,8 @@ class ExecutorConfig:
         if self.start_home_tol_rad is not None:
             require_positive("start_home_tol_rad (or null: off)", self.start_home_tol_rad)
         require_choice("executor.cut_segments", self.cut_segments, CUT_SEGMENTS)
-        if isinstance(self.max_segment_m, str):
-            require_choice("executor.max_segment_m", self.max_segment_m, ("auto",))
-        elif self.max_segment_m is not None:
-            require_positive("max_segment_m (or null: off, or auto)", self.max_segment_m)
+        if self.max_segment_m is not None:
+            require_positive("max_segment_m (or null: off)", self.max_segment_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -193,16 +190,7 @@ class ExecutorConfig:
 
 
 CUT_SEGMENTS = ("closed_descents", "vertical", "all")  # executor.cut_segments
-MAX_SEGMENT_LIBERO_M = 0.04  # executor.max_segment_m "auto" on LIBERO: the oracle's spacing (docs/seeds.md, stop 68)
-
-
-def resolve_max_segment(max_segment_m: float | None | str, world_kind: str) -> float | None:
-    """``executor.max_segment_m`` with "auto" made concrete for a world (see :class:`ExecutorConfig`)."""
-    if max_segment_m == "auto":
-        return MAX_SEGMENT_LIBERO_M if world_kind == "libero" else None
-    return max_segment_m
-
-
+VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
 TOUCH_SLOWER = 4.0  # a touch's steps are planned this many times slower than a move (it must not strike what it meets)
 
@@ -295,9 +283,6 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
-VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
-
-
 def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
                       max_segment_m: float | None, which: str = "all"):
     """Waypoints with every segment longer than ``max_segment_m`` cut into the fewest equal pieces no longer than it
@@ -374,10 +359,9 @@ class MotionExecutor:
 
     def __init__(self, sim: Simulation, *, ik: IKSolver, smoother, controller, safety, dynamics,
                  camera: CameraModel, config: ExecutorConfig = ExecutorConfig(),
-                 lift_config: LiftConfig = LiftConfig(), world_kind: str = "workcell"):
+                 lift_config: LiftConfig = LiftConfig()):
         self.sim, self.ik, self.smoother, self.controller = sim, ik, smoother, controller
         self.safety, self.dyn, self.camera, self.config, self.lift_config = safety, dynamics, camera, config, lift_config
-        self.max_segment_m = resolve_max_segment(config.max_segment_m, world_kind)  # "auto" made concrete
         self.substeps = sim.timing.substeps
         self.ctrl_dt = sim.timing.ctrl_dt
         self.events: list[dict] = []
@@ -453,8 +437,7 @@ class MotionExecutor:
             source = source[last]
             corners = len(points) - len(plan) - retreat
             points, grip, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                                  max_segment_m=self.max_segment_m,
-                                                  which=cfg.cut_segments)
+                                                  max_segment_m=cfg.max_segment_m, which=cfg.cut_segments)
             source = source[cut]
             rots = rots[source]
         rots = np.asarray(rots)
