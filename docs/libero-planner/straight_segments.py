@@ -20,18 +20,34 @@ SECTION = "libero-straight-segments"
 BOOK = "libero_10:STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"
 SCREEN_FIRST, SCREEN_LAYOUTS = 30192, 20  # training-range layouts (docs/seeds.md): where the bow was found
 PER_TASK = {"libero_spatial": 5, "libero_object": 5, "libero_goal": 5, "libero_10": 10}
-# (run prefix, what ran, the fresh layouts' first seed per suite); both rules were set before their runs (docs/seeds.md,
-# stop 68). The first ran at 5e03de3, a cut point's orientation slerped along its segment; the second at 85b7765, a
-# cut point at its segment end's orientation (as a squared corner).
-JUDGEMENTS = (("cut", "first judgement: cut points' orientations slerped (5e03de3)",
+OFF = " --executor.max-segment-m None"
+ALL, VERTICAL, CLOSED = (f" --executor.max-segment-m 0.04 --executor.cut-segments {w}"
+                         for w in ("all", "vertical", "closed_descents"))
+# (run prefix, what ran, the cut's flags, the fresh layouts' first seed per suite); each rule was set before its runs
+# (docs/seeds.md, stop 68). The first ran at 5e03de3 (every long segment cut, a cut point's orientation slerped along
+# its segment); the second at 85b7765 (every long segment, a cut point at its segment end's orientation, as a squared
+# corner; stopped once libero_10 had failed); the third at a218b8b (a closed hand's vertical descents alone).
+JUDGEMENTS = (("cut", "first judgement: every long segment cut, orientations slerped (5e03de3)", ALL,
                {"libero_spatial": 20052, "libero_object": 20060, "libero_goal": 20221, "libero_10": 20253}),
-              ("cut2", "second judgement: cut points at their segment end's orientation (85b7765)",
-               {"libero_spatial": 20057, "libero_object": 20065, "libero_goal": 20226, "libero_10": 20263}))
-SETTINGS = (("off", "as planned (no cut)", " --executor.max-segment-m None"),
-            ("on", "segments cut to 4 cm", " --executor.max-segment-m 0.04"))
-SCREENS = (("off", "as planned (no cut)", " --executor.max-segment-m None"),
-           ("on", "cut, orientations slerped (5e03de3)", " --executor.max-segment-m 0.04"),
-           ("on2", "cut, each at its segment end's orientation (85b7765)", " --executor.max-segment-m 0.04"))
+              ("cut2", "second judgement: every long segment cut, at its end's orientation (85b7765; stopped once "
+               "libero_10 had failed, its other suites' layouts libero_spatial 20057, libero_object 20065, libero_goal "
+               "20226 on)", ALL, {"libero_10": 20263}),
+              ("cut3", "third judgement: a closed hand's vertical descents cut (a218b8b)", CLOSED,
+               {"libero_spatial": 20062, "libero_object": 20070, "libero_goal": 20231, "libero_10": 20273}))
+SETTINGS = (("off", "as planned (no cut)"), ("on", "cut to 4 cm"))
+SCREENS = (("off", "as planned (no cut)", OFF),
+           ("on", "every long segment, orientations slerped (5e03de3)", ALL),
+           ("on2", "every long segment, at its end's orientation (85b7765)", ALL),
+           ("on3", "vertical segments (a218b8b)", VERTICAL),
+           ("on4", "a closed hand's vertical descents (a218b8b)", CLOSED))
+# the five libero_10 tasks the second judgement lost on (its layouts, now development ones), with the narrower cuts
+LOSERS = ("KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it",
+          "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
+          "KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it",
+          "KITCHEN_SCENE8_put_both_moka_pots_on_the_stove",
+          "LIVING_ROOM_SCENE2_put_both_the_cream_cheese_box_and_the_butter_in_the_basket")
+LOSER_RUNS = (("cutlosers_vertical", "vertical segments", VERTICAL),
+              ("cutlosers_closed", "a closed hand's vertical descents", CLOSED))
 MODES = ("global", "glsr")
 KEEP = ("task", "suite", "mode", "seed", "success", "steps", "tracking_reflexes")
 
@@ -42,13 +58,16 @@ def _command(which: str, episodes: int, first: int, flag: str) -> str:
 
 
 def _runs() -> list[tuple[str, str, str]]:
-    """(run directory under runs/dev, setting, command): the book's screens, then one run per judgement, suite and
-    setting. (The uncut runs ran before "auto" was the default, without the flag: the same thing.)"""
+    """(run directory under runs/dev, setting, command): the book's screens, the second judgement's losers again, then
+    one run per judgement, suite and setting. (Uncut runs made before "--executor.max-segment-m None" existed ran
+    without the flag: the same thing.)"""
     screen = [(f"cutscreen_{name}", f"cutscreen_{name}",
                _command(f"--tasks {BOOK}", SCREEN_LAYOUTS, SCREEN_FIRST, flag)) for name, _, flag in SCREENS]
-    return screen + [(f"{prefix}_{name}_{suite}", f"{prefix}_{name}",
-                      _command(f"--suite {suite}", PER_TASK[suite], first[suite], flag))
-                     for prefix, _, first in JUDGEMENTS for suite in first for name, _, flag in SETTINGS]
+    losers = ",".join(f"libero_10:{t}" for t in LOSERS)
+    again = [(name, name, _command(f"--tasks {losers}", 10, 20263, flag)) for name, _, flag in LOSER_RUNS]
+    return screen + again + [(f"{prefix}_{name}_{suite}", f"{prefix}_{name}",
+                              _command(f"--suite {suite}", PER_TASK[suite], first[suite], on if name == "on" else OFF))
+                             for prefix, _, on, first in JUDGEMENTS for suite in first for name, _ in SETTINGS]
 
 
 def _row(setting: str, e: dict) -> dict | None:
@@ -80,13 +99,30 @@ def _screen(rows: list[dict]) -> list[str]:
     return out + [""]
 
 
+def _losers(rows: list[dict]) -> list[str]:
+    base = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows if r["run"] == "cut2_off"}
+    out = ["**The second judgement's losers again** (its libero_10 layouts 20263-20272, now development ones; the five "
+           "tasks it lost on), with the narrower cuts; won / lost against its uncut run:", "",
+           "| segments | mode | successes | won / lost |", "|---|---|---|---|"]
+    for mode in MODES:
+        keys = {(r["task"], r["mode"], r["seed"]) for r in rows if r["run"] == LOSER_RUNS[0][0] and r["mode"] == mode}
+        out.append(f"| as planned (no cut) | {mode} | {sum(base.get(k, False) for k in keys)}/{len(keys)} | - |")
+        for name, text, _ in LOSER_RUNS:
+            eps = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows
+                   if r["run"] == name and r["mode"] == mode}
+            won = sum(ok and not base.get(k, True) for k, ok in eps.items())
+            lost = sum(not ok and base.get(k, False) for k, ok in eps.items())
+            out.append(f"| {text} | {mode} | {sum(eps.values())}/{len(eps)} | {won} / {lost} |")
+    return out + [""]
+
+
 def _judgement(rows: list[dict], prefix: str, label: str, first: dict) -> list[str]:
     ran = Counter((r["run"], r["suite"], r["mode"]) for r in rows)
-    done = [s for s in first if all(ran[(f"{prefix}_{n}", s, m)] == 10 * PER_TASK[s] for n, _, _ in SETTINGS
+    done = [s for s in first if all(ran[(f"{prefix}_{n}", s, m)] == 10 * PER_TASK[s] for n, _ in SETTINGS
                                     for m in MODES)]
     rows = [r for r in rows if r["run"].startswith(prefix + "_") and r["suite"] in done]
     layouts = ", ".join(f"{s} {first[s]}-{first[s] + PER_TASK[s] - 1}" for s in done)
-    table_rows = tuple((f"{prefix}_{name}", mode, text, "") for mode in MODES for name, text, _ in SETTINGS)
+    table_rows = tuple((f"{prefix}_{name}", mode, text, "") for mode in MODES for name, text in SETTINGS)
     lines = [f"**{label[0].upper() + label[1:]}.** Sampled development layouts ({layouts}), all ten tasks of each "
              "suite, the stack's defaults otherwise (no `--checkpoint`); won / lost against the uncut row in the same "
              "mode on the same layouts:", ""] + dev_runs.checkpoint_table(rows, table_rows, head="segments")
@@ -97,8 +133,8 @@ def _judgement(rows: list[dict], prefix: str, label: str, first: dict) -> list[s
 
 def lines() -> list[str]:
     rows = [json.loads(x) for x in OUT.read_text().splitlines() if x.strip()]
-    judged = [line for prefix, label, first in JUDGEMENTS for line in _judgement(rows, prefix, label, first)]
-    return _screen(rows) + judged + dev_runs.command_lines("straight_segments.py", 2,
+    judged = [line for prefix, label, _, first in JUDGEMENTS for line in _judgement(rows, prefix, label, first)]
+    return _screen(rows) + _losers(rows) + judged + dev_runs.command_lines("straight_segments.py", 2,
                                                            [(run, cmd) for run, _, cmd in _runs()])
 
 
