@@ -33,13 +33,14 @@ def episode_config(task: str, seed: int, planner: str, mode: str = "global", che
 def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict], dict | None]) -> None:
     """For each (run directory under runs/dev, the command that makes it): ``row(run, episode)`` of every episode
     (None leaves one out), written to ``out``; a missing run keeps the rows ``out`` already holds for it (runs/ does
-    not travel between machines, the gathered file does), or is named with its command."""
+    not travel between machines, the gathered file does), or is named with its command. A row whose ``run`` is not
+    its directory (a setting shared by several runs) also keeps the directory, as ``dir``, so it is found again."""
     before: dict = defaultdict(list)
     if out.is_file():
         for line in out.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
-                before[r.get("run")].append(r)
+                before[r.get("dir", r.get("run"))].append(r)
     rows = []
     for name, cmd in runs:
         p = ROOT / "runs" / "dev" / name / "episodes.jsonl"
@@ -53,7 +54,7 @@ def gather(runs: Iterable[tuple[str, str]], out: Path, row: Callable[[str, dict]
         for line in p.read_text().splitlines():
             r = row(name, json.loads(line))
             if r is not None:
-                rows.append(r)
+                rows.append(r if r.get("run") == name else {**r, "dir": name})
     out.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     print(f"{len(rows)} episodes -> {out.relative_to(ROOT)}")
 
