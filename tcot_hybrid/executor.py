@@ -94,7 +94,11 @@ class ExecutorConfig:
                       adopted: docs/seeds.md, stop 68). Down: straighter, more waypoints to solve, slower moves. [m]
     cut_segments:     which segments ``max_segment_m`` cuts: "closed_descents" (default), the descents of a closed
                       hand within VERTICAL_TILT_RAD (20 degrees) of straight down (an object lowered onto its place: the
-                      book's); "vertical", every segment that close to straight up or down (grasp descents, rises);
+                      book's); "holding_descents", those descents only when the hand, as the segment begins, holds
+                      something (closed, its fingers more than HOLDING_MIN_OPENING_M apart), not a hand closed on
+                      purpose for a push (cut when the segment begins, not when the plan is adopted; not with a
+                      whole-plan IK solve); "vertical", every segment that close to straight up or down (grasp descents,
+                      rises);
                       "all", the moves over too (cut everywhere, the hand's paths changed on tasks that had succeeded
                       and libero_10 lost more layouts than it won: docs/libero-planner.md, "Straight segments").
     start_home_tol_rad: an episode whose arm starts further than this from the robot's home posture on any joint
@@ -189,7 +193,8 @@ class ExecutorConfig:
                               f"<= the depth")
 
 
-CUT_SEGMENTS = ("closed_descents", "vertical", "all")  # executor.cut_segments
+CUT_SEGMENTS = ("closed_descents", "holding_descents", "vertical", "all")  # executor.cut_segments
+HOLDING_MIN_OPENING_M = 0.0025  # a closed hand whose fingers stay further apart holds something (as empty_grasp_m)
 VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
 TOUCH_SLOWER = 4.0  # a touch's steps are planned this many times slower than a move (it must not strike what it meets)
@@ -436,8 +441,10 @@ class MotionExecutor:
             retreat = len(last) > len(source)
             source = source[last]
             corners = len(points) - len(plan) - retreat
-            points, grip, cut = cut_long_segments(self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                                                  max_segment_m=cfg.max_segment_m, which=cfg.cut_segments)
+            points, grip, cut = cut_long_segments(
+                self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
+                max_segment_m=None if cfg.cut_segments == "holding_descents" else cfg.max_segment_m,
+                which=cfg.cut_segments)
             source = source[cut]
             rots = rots[source]
         rots = np.asarray(rots)
@@ -494,7 +501,29 @@ class MotionExecutor:
     def _is_stop(self, i: int) -> bool:
         return i == len(self.points) - 1 or bool(self.grip[i]) != self.sim.gripper_closed_cmd()
 
+    def _cut_holding_descent(self, i: int) -> None:
+        """``cut_segments`` "holding_descents": waypoint ``i``'s segment (from the point before it, or from the TCP),
+        when a long closed descent begun by a hand that holds something, is cut now (see ExecutorConfig); the pieces
+        are spliced in before ``i``, so waypoint ``i`` becomes the first of them (event ``segment_cut``)."""
+        cfg, sim = self.config, self.sim
+        if (cfg.cut_segments != "holding_descents" or cfg.max_segment_m is None or self._plan_q is not None
+                or not sim.gripper_closed_cmd() or sim.gripper_opening_m() <= HOLDING_MIN_OPENING_M):
+            return
+        start = self.points[i - 1] if i > 0 else sim.tcp_pos()
+        points, grip, cut = cut_long_segments(start, True, self.points[i:i + 1], self.grip[i:i + 1],
+                                              max_segment_m=cfg.max_segment_m, which="closed_descents")
+        if len(points) == 1:
+            return
+        self.points = np.concatenate([self.points[:i], points, self.points[i + 1:]])
+        self.grip = np.concatenate([self.grip[:i], grip, self.grip[i + 1:]])
+        self.rots = np.concatenate([self.rots[:i], np.repeat(self.rots[i:i + 1], len(points), axis=0),
+                                    self.rots[i + 1:]])
+        self.point_source = np.concatenate([self.point_source[:i], np.repeat(self.point_source[i:i + 1], len(points)),
+                                            self.point_source[i + 1:]])
+        self.event("segment_cut", waypoint=i, pieces=len(points), opening_m=round(sim.gripper_opening_m(), 5))
+
     def _activate(self, i: int) -> None:
+        self._cut_holding_descent(i)
         # A replan that keeps heading for the stop we are already waiting at keeps the arrival clock:
         # otherwise replanning faster than reach_timeout_s would wait there forever.
         keep = (self._arrived_at is not None and self._waiting_at is not None
