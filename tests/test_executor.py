@@ -559,6 +559,50 @@ def test_which_segments_are_cut():
     assert cuts["all"].tolist() == [3, 0, 4, 3, 3, 0]
 
 
+def _closed_descent_run(opening_m: float | None):
+    """The workcell hand closed in the air (fingers held ``opening_m`` apart, as by an object, or None: as they close
+    on nothing), then a plan 15 cm straight down with it closed, ``cut_segments`` "holding_descents"; returns the
+    executor after the plan."""
+    from tcot_hybrid.episode import EpisodeRunner
+    from tcot_hybrid.plan import WaypointPlan
+    from tcot_hybrid.run_config import RunConfig
+
+    r = EpisodeRunner(RunConfig(task="goal_cube_on_plate", seed=0,
+                                executor=ExecutorConfig(max_segment_m=0.04, cut_segments="holding_descents")))
+    r.settle()
+    ex, cam, sim = r.stack.executor, r.stack.camera, r.stack.sim
+    sim.set_gripper(True)
+    for _ in range(60):
+        ex.tick()
+    if opening_m is not None:
+        sim.gripper_opening_m = lambda: opening_m
+    goal = sim.tcp_pos() + np.array([0.0, 0.0, -0.15])
+    uv, depth = cam.project(goal[None])
+    assert ex.set_plan(WaypointPlan(uv_px=uv, depth_m=depth, gripper_closed=np.array([True]), camera=cam.name,
+                                    kind="local"))
+    assert ex.events[-1]["kind"] in ("plan_adopted", "segment_cut")
+    for _ in range(800):
+        ex.tick()
+        if ex.plan_finished:
+            break
+    assert ex.plan_finished and np.linalg.norm(sim.tcp_pos() - goal) < 0.01
+    return ex
+
+
+def test_a_holding_hands_descent_is_cut_when_it_begins_and_an_empty_closed_hands_is_not():
+    """"holding_descents": the cut is decided as the segment begins, on the fingers' opening: a hand closed on an
+    object (fingers apart) goes down the planned line in 4 cm pieces; a hand closed on purpose with nothing in it (a
+    push) keeps the smoother's path."""
+    held = _closed_descent_run(0.02)
+    cut = [e for e in held.events if e["kind"] == "segment_cut"]
+    assert len(cut) == 1 and cut[0]["pieces"] == 4 and len(held.points) == 4
+    assert np.all(np.diff(held.points[:, 2]) < 0) and np.allclose(held.point_source, 0)
+    empty = _closed_descent_run(None)
+    assert not [e for e in empty.events if e["kind"] == "segment_cut"] and len(empty.points) == 1
+    adopted = [e for e in held.events if e["kind"] == "plan_adopted"][-1]
+    assert adopted["cuts_added"] == 0  # nothing is cut when the plan is adopted
+
+
 @pytest.mark.parametrize("value", [0.0, -0.04])
 def test_the_segment_limit_is_checked(value):
     with pytest.raises(ConfigError, match="max_segment_m") as err:
