@@ -102,7 +102,8 @@ def build_stack(cfg: RunConfig, *, planner_factory=None) -> Stack:
     safety = SafetyLayer(robot)
     ik = make_ik(cfg.ik, robot, cfg.ik_params)
     executor = MotionExecutor(sim, ik=ik, smoother=smoother, controller=controller, safety=safety,
-                              dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift)
+                              dynamics=dyn, camera=camera, config=cfg.executor, lift_config=cfg.lift,
+                              world_kind=task.world_kind)
     ctx = PlannerContext(task=task, world=sim.world, camera=camera, robot_name=robot.name, robot=robot,
                          world_kind=task.world_kind, T_world_base=sim.T_world_base,
                          options={"oracle": cfg.oracle, "learned": cfg.learned, "checkpoint": cfg.checkpoint,

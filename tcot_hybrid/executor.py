@@ -12,6 +12,7 @@ planner rate and before any motion (never inside ``control_tick``); an infeasibl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -88,17 +89,18 @@ class ExecutorConfig:
                       one (a learned 18 cm descent into the book caddy's back compartment bowed 2.9 cm sideways, and the
                       book landed on the compartment's wall; docs/libero-planner.md, "Straight segments"). Oracle
                       plans are at most ``OracleConfig.spacing_m`` (4 cm) apart already; direct plans (one waypoint: the
-                      baseline's action) are not cut. None (YAML null, the default) = off: on LIBERO, cut to 4 cm
-                      (``cut_segments`` every one, the vertical ones, or a closed hand's vertical descents), the book
-                      went from 5 to 8-9 of 10 and other libero_10 tasks lost about as much (judged three times, not
-                      adopted: docs/seeds.md, stop 68). Down: straighter, more waypoints to solve, slower moves. [m]
-    cut_segments:     which segments ``max_segment_m`` cuts: "closed_descents" (default), the descents of a closed
-                      hand within VERTICAL_TILT_RAD (20 degrees) of straight down (an object lowered onto its place: the
-                      book's); "holding_descents", those descents only when the hand, as the segment begins, holds
-                      something (closed, its fingers more than HOLDING_MIN_OPENING_M apart), not a hand closed on
-                      purpose for a push (cut when the segment begins, not when the plan is adopted; not with a
-                      whole-plan IK solve); "vertical", every segment that close to straight up or down (grasp descents,
-                      rises);
+                      baseline's action) are not cut. "auto" (default): MAX_SEGMENT_LIBERO_M on LIBERO (with
+                      ``cut_segments`` "holding_descents": judged on development layouts of all 40 tasks, docs/seeds.md,
+                      stop 68; every long segment, or every closed descent, cut lost other libero_10 tasks as much as
+                      the book gained), off on the workcell (its reporting tables were measured without it); None
+                      (YAML null) = off. Down: straighter, more waypoints to solve, slower moves. [m]
+    cut_segments:     which segments ``max_segment_m`` cuts: "holding_descents" (default), the descents within
+                      VERTICAL_TILT_RAD (20 degrees) of straight down of a hand that, as the segment begins, holds
+                      something (closed, its fingers more than HOLDING_MIN_OPENING_M apart: an object lowered onto its
+                      place, the book's), decided then, not when the plan is adopted (not with a whole-plan IK solve);
+                      "closed_descents", those of any closed hand, a hand closed on purpose for a push too (its
+                      straighter descent to the push lost the bottom drawer and the stove's knob a layout or two);
+                      "vertical", every segment that close to straight up or down (grasp descents, rises);
                       "all", the moves over too (cut everywhere, the hand's paths changed on tasks that had succeeded
                       and libero_10 lost more layouts than it won: docs/libero-planner.md, "Straight segments").
     start_home_tol_rad: an episode whose arm starts further than this from the robot's home posture on any joint
@@ -155,8 +157,8 @@ class ExecutorConfig:
     switch_min_horizontal_m: float | None = 0.005
     grasp_along_approach: bool = False
     release_retreat_m: float | None = 0.08
-    max_segment_m: float | None = None
-    cut_segments: str = "closed_descents"
+    max_segment_m: float | None | Literal["auto"] = "auto"
+    cut_segments: str = "holding_descents"
     start_home_tol_rad: float | None = 0.002
     hand_twin: bool = True
     touch_retry_depth_m: float | None = None
@@ -176,8 +178,10 @@ class ExecutorConfig:
         if self.start_home_tol_rad is not None:
             require_positive("start_home_tol_rad (or null: off)", self.start_home_tol_rad)
         require_choice("executor.cut_segments", self.cut_segments, CUT_SEGMENTS)
-        if self.max_segment_m is not None:
-            require_positive("max_segment_m (or null: off)", self.max_segment_m)
+        if isinstance(self.max_segment_m, str):
+            require_choice("executor.max_segment_m", self.max_segment_m, ("auto",))
+        elif self.max_segment_m is not None:
+            require_positive("max_segment_m (or null: off, or auto)", self.max_segment_m)
         require_positive("reach_tol_m", self.reach_tol_m)
         require_positive("stop_match_m", self.stop_match_m)
         require_positive("resync_tol_rad", self.resync_tol_rad)
@@ -194,6 +198,7 @@ class ExecutorConfig:
 
 
 CUT_SEGMENTS = ("closed_descents", "holding_descents", "vertical", "all")  # executor.cut_segments
+MAX_SEGMENT_LIBERO_M = 0.04  # executor.max_segment_m "auto" on LIBERO: the oracle's spacing (docs/seeds.md, stop 68)
 HOLDING_MIN_OPENING_M = 0.0025  # a closed hand whose fingers stay further apart holds something (as empty_grasp_m)
 VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
@@ -288,6 +293,13 @@ def retreat_after_release(start_closed: bool, points: np.ndarray, grip: np.ndarr
     return np.vstack([points, above]), np.r_[grip, False], np.r_[source, len(points) - 1]
 
 
+def resolve_max_segment(max_segment_m: float | None | str, world_kind: str) -> float | None:
+    """``executor.max_segment_m`` with "auto" made concrete for a world (see :class:`ExecutorConfig`)."""
+    if max_segment_m == "auto":
+        return MAX_SEGMENT_LIBERO_M if world_kind == "libero" else None
+    return max_segment_m
+
+
 def cut_long_segments(start: np.ndarray, start_closed: bool, points: np.ndarray, grip: np.ndarray, *,
                       max_segment_m: float | None, which: str = "all"):
     """Waypoints with every segment longer than ``max_segment_m`` cut into the fewest equal pieces no longer than it
@@ -364,9 +376,10 @@ class MotionExecutor:
 
     def __init__(self, sim: Simulation, *, ik: IKSolver, smoother, controller, safety, dynamics,
                  camera: CameraModel, config: ExecutorConfig = ExecutorConfig(),
-                 lift_config: LiftConfig = LiftConfig()):
+                 lift_config: LiftConfig = LiftConfig(), world_kind: str = "workcell"):
         self.sim, self.ik, self.smoother, self.controller = sim, ik, smoother, controller
         self.safety, self.dyn, self.camera, self.config, self.lift_config = safety, dynamics, camera, config, lift_config
+        self.max_segment_m = resolve_max_segment(config.max_segment_m, world_kind)  # "auto" made concrete
         self.substeps = sim.timing.substeps
         self.ctrl_dt = sim.timing.ctrl_dt
         self.events: list[dict] = []
@@ -443,7 +456,7 @@ class MotionExecutor:
             corners = len(points) - len(plan) - retreat
             points, grip, cut = cut_long_segments(
                 self.sim.tcp_pos(), self.sim.gripper_closed_cmd(), points, grip,
-                max_segment_m=None if cfg.cut_segments == "holding_descents" else cfg.max_segment_m,
+                max_segment_m=None if cfg.cut_segments == "holding_descents" else self.max_segment_m,
                 which=cfg.cut_segments)
             source = source[cut]
             rots = rots[source]
@@ -506,12 +519,12 @@ class MotionExecutor:
         when a long closed descent begun by a hand that holds something, is cut now (see ExecutorConfig); the pieces
         are spliced in before ``i``, so waypoint ``i`` becomes the first of them (event ``segment_cut``)."""
         cfg, sim = self.config, self.sim
-        if (cfg.cut_segments != "holding_descents" or cfg.max_segment_m is None or self._plan_q is not None
+        if (cfg.cut_segments != "holding_descents" or self.max_segment_m is None or self._plan_q is not None
                 or not sim.gripper_closed_cmd() or sim.gripper_opening_m() <= HOLDING_MIN_OPENING_M):
             return
         start = self.points[i - 1] if i > 0 else sim.tcp_pos()
         points, grip, cut = cut_long_segments(start, True, self.points[i:i + 1], self.grip[i:i + 1],
-                                              max_segment_m=cfg.max_segment_m, which="closed_descents")
+                                              max_segment_m=self.max_segment_m, which="closed_descents")
         if len(points) == 1:
             return
         self.points = np.concatenate([self.points[:i], points, self.points[i + 1:]])

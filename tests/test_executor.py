@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from tcot_hybrid.errors import ConfigError
-from tcot_hybrid.executor import (RETREAT_NEAR_M, ExecutorConfig, cut_long_segments, retreat_after_release,
-                                  square_transits)
+from tcot_hybrid.executor import (MAX_SEGMENT_LIBERO_M, RETREAT_NEAR_M, ExecutorConfig, cut_long_segments,
+                                  resolve_max_segment, retreat_after_release, square_transits)
 
 H, V = 0.06, 0.02  # the thresholds these tests use
 
@@ -603,13 +603,21 @@ def test_a_holding_hands_descent_is_cut_when_it_begins_and_an_empty_closed_hands
     assert adopted["cuts_added"] == 0  # nothing is cut when the plan is adopted
 
 
-@pytest.mark.parametrize("value", [0.0, -0.04])
+@pytest.mark.parametrize("value", [0.0, -0.04, "always"])
 def test_the_segment_limit_is_checked(value):
     with pytest.raises(ConfigError, match="max_segment_m") as err:
         ExecutorConfig(max_segment_m=value)
-    assert str(value) in str(err.value) and "> 0" in str(err.value)
+    assert str(value) in str(err.value) and ("auto" in str(err.value) or "> 0" in str(err.value))
     with pytest.raises(ConfigError, match="cut_segments.*closed_descents"):
         ExecutorConfig(cut_segments="diagonal")
+
+
+def test_the_segment_limit_is_auto_a_holding_hands_descents_on_libero_and_off_on_the_workcell():
+    cfg = ExecutorConfig()
+    assert cfg.max_segment_m == "auto" and cfg.cut_segments == "holding_descents"
+    assert resolve_max_segment("auto", "libero") == MAX_SEGMENT_LIBERO_M == 0.04
+    assert resolve_max_segment("auto", "workcell") is None
+    assert resolve_max_segment(0.02, "workcell") == 0.02 and resolve_max_segment(None, "libero") is None
 
 
 def test_a_cut_plan_keeps_the_hand_near_its_planned_line():

@@ -118,3 +118,12 @@ def test_a_touch_cut_short_by_a_move_home_is_said():
     touch = _touches(ex)
     assert len(touch) == 1 and touch[0]["ended"] == "interrupted: the plan was dropped" and not touch[0]["touched"]
     assert ex.phase == "home" and not ex.sim.gripper_closed_cmd()
+
+
+def test_libero_cuts_a_holding_hands_descents_by_default():
+    """``executor.max_segment_m`` "auto" is 4 cm on LIBERO, for the descents of a hand that holds something
+    (``cut_segments`` "holding_descents"); an open hand's descent onto its grasp is left as planned."""
+    ex, grasp, _, closed_at = _grasp_in_the_air(touch=False, retry=False)
+    assert ex.max_segment_m == 0.04 and ex.config.cut_segments == "holding_descents"
+    assert not [e for e in ex.events if e["kind"] == "segment_cut"] and len(ex.points) == 2
+    assert closed_at is not None and np.linalg.norm(closed_at - grasp) < 0.01
