@@ -21,8 +21,8 @@ BOOK = "libero_10:STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_back_compart
 SCREEN_FIRST, SCREEN_LAYOUTS = 30192, 20  # training-range layouts (docs/seeds.md): where the bow was found
 PER_TASK = {"libero_spatial": 5, "libero_object": 5, "libero_goal": 5, "libero_10": 10}
 OFF = " --executor.max-segment-m None"
-ALL, VERTICAL, CLOSED = (f" --executor.max-segment-m 0.04 --executor.cut-segments {w}"
-                         for w in ("all", "vertical", "closed_descents"))
+ALL, VERTICAL, CLOSED, HOLDING = (f" --executor.max-segment-m 0.04 --executor.cut-segments {w}"
+                                  for w in ("all", "vertical", "closed_descents", "holding_descents"))
 # (run prefix, what ran, the cut's flags, the fresh layouts' first seed per suite); each rule was set before its runs
 # (docs/seeds.md, stop 68). The first ran at 5e03de3 (every long segment cut, a cut point's orientation slerped along
 # its segment); the second at 85b7765 (every long segment, a cut point at its segment end's orientation, as a squared
@@ -33,21 +33,26 @@ JUDGEMENTS = (("cut", "first judgement: every long segment cut, orientations sle
                "libero_10 had failed, its other suites' layouts libero_spatial 20057, libero_object 20065, libero_goal "
                "20226 on)", ALL, {"libero_10": 20263}),
               ("cut3", "third judgement: a closed hand's vertical descents cut (a218b8b)", CLOSED,
-               {"libero_spatial": 20062, "libero_object": 20070, "libero_goal": 20231, "libero_10": 20273}))
+               {"libero_spatial": 20062, "libero_object": 20070, "libero_goal": 20231, "libero_10": 20273}),
+              ("cut4", "fourth judgement: the vertical descents of a hand holding something cut (1b8a012)", HOLDING,
+               {"libero_spatial": 20067, "libero_object": 20075, "libero_goal": 20236, "libero_10": 20283}))
 SETTINGS = (("off", "as planned (no cut)"), ("on", "cut to 4 cm"))
 SCREENS = (("off", "as planned (no cut)", OFF),
            ("on", "every long segment, orientations slerped (5e03de3)", ALL),
            ("on2", "every long segment, at its end's orientation (85b7765)", ALL),
            ("on3", "vertical segments (a218b8b)", VERTICAL),
-           ("on4", "a closed hand's vertical descents (a218b8b)", CLOSED))
-# the five libero_10 tasks the second judgement lost on (its layouts, now development ones), with the narrower cuts
+           ("on4", "a closed hand's vertical descents (a218b8b)", CLOSED),
+           ("on5", "a holding hand's vertical descents (1b8a012)", HOLDING))
+# the five libero_10 tasks the second judgement lost on, with the narrower cuts, on its layouts and on the third's
+# (both development ones by then): (run, label, flags, first layout, the uncut run they are counted against)
 LOSERS = ("KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it",
           "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
           "KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it",
           "KITCHEN_SCENE8_put_both_moka_pots_on_the_stove",
           "LIVING_ROOM_SCENE2_put_both_the_cream_cheese_box_and_the_butter_in_the_basket")
-LOSER_RUNS = (("cutlosers_vertical", "vertical segments", VERTICAL),
-              ("cutlosers_closed", "a closed hand's vertical descents", CLOSED))
+LOSER_RUNS = (("cutlosers_vertical", "vertical segments", VERTICAL, 20263, "cut2_off"),
+              ("cutlosers_closed", "a closed hand's vertical descents", CLOSED, 20263, "cut2_off"),
+              ("cutlosers3_holding", "a holding hand's vertical descents", HOLDING, 20273, "cut3_off"))
 MODES = ("global", "glsr")
 KEEP = ("task", "suite", "mode", "seed", "success", "steps", "tracking_reflexes")
 
@@ -64,7 +69,7 @@ def _runs() -> list[tuple[str, str, str]]:
     screen = [(f"cutscreen_{name}", f"cutscreen_{name}",
                _command(f"--tasks {BOOK}", SCREEN_LAYOUTS, SCREEN_FIRST, flag)) for name, _, flag in SCREENS]
     losers = ",".join(f"libero_10:{t}" for t in LOSERS)
-    again = [(name, name, _command(f"--tasks {losers}", 10, 20263, flag)) for name, _, flag in LOSER_RUNS]
+    again = [(name, name, _command(f"--tasks {losers}", 10, first, flag)) for name, _, flag, first, _ in LOSER_RUNS]
     return screen + again + [(f"{prefix}_{name}_{suite}", f"{prefix}_{name}",
                               _command(f"--suite {suite}", PER_TASK[suite], first[suite], on if name == "on" else OFF))
                              for prefix, _, on, first in JUDGEMENTS for suite in first for name, _ in SETTINGS]
@@ -100,19 +105,24 @@ def _screen(rows: list[dict]) -> list[str]:
 
 
 def _losers(rows: list[dict]) -> list[str]:
-    base = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows if r["run"] == "cut2_off"}
-    out = ["**The second judgement's losers again** (its libero_10 layouts 20263-20272, now development ones; the five "
-           "tasks it lost on), with the narrower cuts; won / lost against its uncut run:", "",
-           "| segments | mode | successes | won / lost |", "|---|---|---|---|"]
-    for mode in MODES:
-        keys = {(r["task"], r["mode"], r["seed"]) for r in rows if r["run"] == LOSER_RUNS[0][0] and r["mode"] == mode}
-        out.append(f"| as planned (no cut) | {mode} | {sum(base.get(k, False) for k in keys)}/{len(keys)} | - |")
-        for name, text, _ in LOSER_RUNS:
-            eps = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows
-                   if r["run"] == name and r["mode"] == mode}
-            won = sum(ok and not base.get(k, True) for k, ok in eps.items())
-            lost = sum(not ok and base.get(k, False) for k, ok in eps.items())
-            out.append(f"| {text} | {mode} | {sum(eps.values())}/{len(eps)} | {won} / {lost} |")
+    out = ["**The second judgement's losers again** (the five libero_10 tasks it lost on, on its layouts "
+           "20263-20272 and on the third's 20273-20282, by then development ones), with the narrower cuts; won / lost "
+           "against the uncut run on the same layouts:", "", "| segments | layouts | mode | successes | won / lost |",
+           "|---|---|---|---|---|"]
+    for first, base_run in sorted({(f, b) for _, _, _, f, b in LOSER_RUNS}):
+        runs = [x for x in LOSER_RUNS if x[3] == first]
+        for mode in MODES:
+            keys = {(r["task"], r["mode"], r["seed"]) for r in rows if r["run"] == runs[0][0] and r["mode"] == mode}
+            base = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows if r["run"] == base_run}
+            out.append(f"| as planned (no cut) | {first}-{first + 9} | {mode} | "
+                       f"{sum(base.get(k, False) for k in keys)}/{len(keys)} | - |")
+            for name, text, _, _, _ in runs:
+                eps = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows
+                       if r["run"] == name and r["mode"] == mode}
+                won = sum(ok and not base.get(k, True) for k, ok in eps.items())
+                lost = sum(not ok and base.get(k, False) for k, ok in eps.items())
+                out.append(f"| {text} | {first}-{first + 9} | {mode} | {sum(eps.values())}/{len(eps)} | "
+                           f"{won} / {lost} |")
     return out + [""]
 
 
