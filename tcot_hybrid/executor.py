@@ -523,8 +523,8 @@ class MotionExecutor:
                 or not sim.gripper_closed_cmd() or sim.gripper_opening_m() <= HOLDING_MIN_OPENING_M):
             return
         start = self.points[i - 1] if i > 0 else sim.tcp_pos()
-        points, grip, cut = cut_long_segments(start, True, self.points[i:i + 1], self.grip[i:i + 1],
-                                              max_segment_m=self.max_segment_m, which="closed_descents")
+        points, grip, _ = cut_long_segments(start, True, self.points[i:i + 1], self.grip[i:i + 1],
+                                            max_segment_m=self.max_segment_m, which="closed_descents")
         if len(points) == 1:
             return
         self.points = np.concatenate([self.points[:i], points, self.points[i + 1:]])
