@@ -23,7 +23,7 @@ from tcot_hybrid.ik import IKSolver, IKTarget, rotation_angle
 from tcot_hybrid.lift import LiftConfig, lift_waypoints
 from tcot_hybrid.plan import WaypointPlan
 from tcot_hybrid.robot import R_DOWN
-from tcot_hybrid.sim import Simulation
+from tcot_hybrid.sim import EMPTY_HAND_OPENING_M, Simulation
 
 
 
@@ -96,7 +96,7 @@ class ExecutorConfig:
                       (YAML null) = off. Down: straighter, more waypoints to solve, slower moves. [m]
     cut_segments:     which segments ``max_segment_m`` cuts: "holding_descents" (default), the descents within
                       VERTICAL_TILT_RAD (20 degrees) of straight down of a hand that, as the segment begins, holds
-                      something (closed, its fingers more than HOLDING_MIN_OPENING_M apart: an object lowered onto its
+                      something (closed, its fingers more than EMPTY_HAND_OPENING_M apart: an object lowered onto its
                       place, the book's), decided then, not when the plan is adopted (not with a whole-plan IK solve);
                       "closed_descents", those of any closed hand, a hand closed on purpose for a push too (its
                       straighter descent to the push lost the bottom drawer and the stove's knob a layout or two);
@@ -199,7 +199,6 @@ class ExecutorConfig:
 
 CUT_SEGMENTS = ("closed_descents", "holding_descents", "vertical", "all")  # executor.cut_segments
 MAX_SEGMENT_LIBERO_M = 0.04  # executor.max_segment_m "auto" on LIBERO: the oracle's spacing (docs/seeds.md, stop 68)
-HOLDING_MIN_OPENING_M = 0.0025  # a closed hand whose fingers stay further apart holds something (as empty_grasp_m)
 VERTICAL_TILT_RAD = np.deg2rad(20.0)  # a segment this close to straight up or down is vertical (cut_segments)
 TOUCH_MAX_TILT_RAD = np.deg2rad(30.0)  # a touch goes straight down: only for a hand this close to pointing down
 TOUCH_SLOWER = 4.0  # a touch's steps are planned this many times slower than a move (it must not strike what it meets)
@@ -520,7 +519,7 @@ class MotionExecutor:
         are spliced in before ``i``, so waypoint ``i`` becomes the first of them (event ``segment_cut``)."""
         cfg, sim = self.config, self.sim
         if (cfg.cut_segments != "holding_descents" or self.max_segment_m is None or self._plan_q is not None
-                or not sim.gripper_closed_cmd() or sim.gripper_opening_m() <= HOLDING_MIN_OPENING_M):
+                or not sim.gripper_closed_cmd() or sim.gripper_opening_m() <= EMPTY_HAND_OPENING_M):
             return
         start = self.points[i - 1] if i > 0 else sim.tcp_pos()
         points, grip, _ = cut_long_segments(start, True, self.points[i:i + 1], self.grip[i:i + 1],

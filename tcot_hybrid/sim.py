@@ -33,6 +33,9 @@ _FATAL_IDX = np.array([int(k) for k in FATAL_WARNINGS])
 
 
 OBJECT_FLOOR_DZ = 0.05  # [m] an object this far below the support surface has fallen through it
+# [m] a closed hand whose finger opening (gripper_opening_m) is below this holds nothing: the LIBERO Panda's fingers stop
+# at 1.2 mm closing on nothing and at 3.5 mm or more on the thinnest object grasped (docs/libero-planner.md)
+EMPTY_HAND_OPENING_M = 0.0025
 
 
 @dataclass(frozen=True)

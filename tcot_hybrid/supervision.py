@@ -52,6 +52,7 @@ from typing import Literal, NamedTuple
 
 from tcot_hybrid.anchors import TrackConfig
 from tcot_hybrid.config import require_choice, require_in_range, require_int, require_positive
+from tcot_hybrid.sim import EMPTY_HAND_OPENING_M
 
 SUPERVISOR_MODES = ("global", "local", "glsr", "glsr_reset")
 CONFIRM_SUCCESS = ("auto", "off", "local_plan")
@@ -136,7 +137,7 @@ class SupervisorConfig:
     confirm_success: str = "auto"
     confirm_motion_m: float = 0.05
     empty_grasp: str = "auto"
-    empty_grasp_m: float = 0.0025
+    empty_grasp_m: float = EMPTY_HAND_OPENING_M
     empty_grasp_steps: int = 3
     empty_grasp_lift_m: float = 0.04
     empty_grasp_put_down_m: float | None = 0.03

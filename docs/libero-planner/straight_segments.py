@@ -109,20 +109,19 @@ def _losers(rows: list[dict]) -> list[str]:
            "20263-20272 and on the third's 20273-20282, by then development ones), with the narrower cuts; won / lost "
            "against the uncut run on the same layouts:", "", "| segments | layouts | mode | successes | won / lost |",
            "|---|---|---|---|---|"]
+    def by_layout(run: str, mode: str) -> dict:
+        return {(r["task"], r["seed"]): r["success"] for r in rows if r["run"] == run and r["mode"] == mode}
+
     for first, base_run in sorted({(f, b) for _, _, _, f, b in LOSER_RUNS}):
         runs = [x for x in LOSER_RUNS if x[3] == first]
         for mode in MODES:
-            keys = {(r["task"], r["mode"], r["seed"]) for r in rows if r["run"] == runs[0][0] and r["mode"] == mode}
-            base = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows if r["run"] == base_run}
+            base, keys = by_layout(base_run, mode), by_layout(runs[0][0], mode).keys()
             out.append(f"| as planned (no cut) | {first}-{first + 9} | {mode} | "
                        f"{sum(base.get(k, False) for k in keys)}/{len(keys)} | - |")
             for name, text, _, _, _ in runs:
-                eps = {(r["task"], r["mode"], r["seed"]): r["success"] for r in rows
-                       if r["run"] == name and r["mode"] == mode}
-                won = sum(ok and not base.get(k, True) for k, ok in eps.items())
-                lost = sum(not ok and base.get(k, False) for k, ok in eps.items())
+                eps = by_layout(name, mode)
                 out.append(f"| {text} | {first}-{first + 9} | {mode} | {sum(eps.values())}/{len(eps)} | "
-                           f"{won} / {lost} |")
+                           f"{dev_runs.won_lost_keyed(base, eps)} |")
     return out + [""]
 
 
